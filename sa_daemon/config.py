@@ -1,0 +1,173 @@
+"""Configuration: one pydantic model, loaded from TOML, with the paper's constants as defaults.
+
+Every section refuses unknown keys and every error names the offending key as a dotted path
+(``reward.beta: Input should be greater than 0``). ``config.toml`` at the repository root documents
+each value; ``tests/test_config.py`` checks that it equals these defaults.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+PositiveFloat = float
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class HuberConfig(_Section):
+    """Huber value function ``V(d)`` of Javdani et al.: quadratic within ``delta``, linear beyond."""
+
+    c: float = Field(gt=0, description="linear multiplier c")
+    delta: float = Field(gt=0, description="switch distance (m or rad)")
+    a: float = Field(ge=0, description="constant added slope a")
+    weight: float = Field(1.0, gt=0, description="multiplier of the whole term")
+
+
+class IntentConfig(_Section):
+    """MaxEnt IOC belief update from joystick input and answers (section III-D, HO reference)."""
+
+    translation: HuberConfig = HuberConfig(c=2.25, delta=0.07, a=0.2, weight=1.0)
+    rotation: HuberConfig = HuberConfig(c=0.20, delta=math.pi / 32, a=0.01, weight=0.07)
+    action_apply_time_s: float = Field(0.1, gt=0, description="time the user's twist is applied in Q (s)")
+    cap: float = Field(0.99, gt=0, lt=1, description="maximum probability of one goal")
+    answer_p_correct: float = Field(0.999, gt=0.5, lt=1, description="P(yes | asked goal is the goal)")
+    resample: bool = Field(True, description="resample and redistribute grasp poses (section III-G)")
+    rotation_weight_m_per_rad: float = Field(
+        0.05, ge=0, description="weight of rotation distance when picking k_c (m per rad)"
+    )
+
+
+class HOConfig(_Section):
+    """Hindsight-optimisation assistance twist (Javdani et al.)."""
+
+    translation_cost_multiplier: float = Field(40.0, gt=0)
+    rotation_cost_multiplier: float = Field(0.05, gt=0)
+    translation_shrink_m: float = Field(0.02, gt=0, description="gradient shrinks linearly inside this (m)")
+    rotation_shrink_rad: float = Field(math.pi / 12, gt=0, description="gradient shrinks inside this (rad)")
+
+
+class MoveConfig(_Section):
+    """Move-to-goal velocity generator: proportional toward ``k_c``, saturated."""
+
+    linear_gain: float = Field(1.0, gt=0, description="1/s")
+    linear_max_mps: float = Field(0.2, gt=0)
+    angular_gain: float = Field(1.0, gt=0, description="1/s")
+    angular_max_radps: float = Field(0.4, gt=0)
+
+
+class BlendConfig(_Section):
+    """Arbitration (section III-B) and the predict-then-act baseline."""
+
+    alpha: float = Field(0.5, ge=0, le=1, description="a_total = (1 - alpha) a_h + alpha a_r")
+    predict_margin: float = Field(0.4, ge=0, le=1, description="blend: assist when p1 - p2 > margin")
+
+
+class RewardConfig(_Section):
+    """Reward of section III-E."""
+
+    scale: float = Field(100.0, gt=0, description="R_t = -scale (1 - 2^(-beta d))")
+    beta: float = Field(8.0, gt=0, description="1/m")
+    rotation_threshold_m: float = Field(0.1, gt=0, description="delta: R_r applies when d_trans <= delta")
+    opposition_penalty: float = Field(-5.0, le=0)
+    opposition_threshold: float = Field(0.01, ge=0, description="|a_i| above this in both twists")
+    question: float = Field(-5.0, le=0)
+    repeated_question: float = Field(-100.0, le=0)
+    goal: float = Field(100.0, ge=0, description="reward for reaching the desired pose")
+    goal_translation_m: float = Field(0.01, gt=0)
+    goal_rotation_rad: float = Field(math.pi / 48, gt=0)
+    gamma: float = Field(0.95, gt=0, le=1)
+    step_s: float = Field(0.1, gt=0, description="duration of one planning step (s)")
+    lookahead_steps: int = Field(
+        15, ge=1, le=100, description="H: a move is judged at its pose after H steps (1 = literal reading)"
+    )
+
+
+class PlannerConfig(_Section):
+    """Anytime solver settings."""
+
+    top_goals: int = Field(10, ge=1, le=64, description="G_m: goals with move and question actions")
+    budget_s: float = Field(0.1, gt=0, le=1.0, description="wall-clock budget of one plan (s)")
+    period_s: float = Field(0.1, ge=0.1, le=0.3, description="planning period (s)")
+    max_questions: int = Field(10, ge=0, le=64, description="deepest chain of questions searched")
+
+
+class InputConfig(_Section):
+    """Joystick scaling: one unit of axis deflection is this twist."""
+
+    linear_scale_mps: float = Field(0.2, gt=0)
+    angular_scale_radps: float = Field(0.4, gt=0)
+
+
+METHODS = (
+    "manual",
+    "ho",
+    "ho+noassist",
+    "blend",
+    "policy",
+    "policy+noqns",
+    "policy+withoutnoassist",
+    "policy+noho",
+)
+
+
+class Config(_Section):
+    """The whole configuration."""
+
+    method: str = Field("policy", description="assistance method, one of METHODS")
+    intent: IntentConfig = IntentConfig()
+    ho: HOConfig = HOConfig()
+    move: MoveConfig = MoveConfig()
+    blend: BlendConfig = BlendConfig()
+    reward: RewardConfig = RewardConfig()
+    planner: PlannerConfig = PlannerConfig()
+    input: InputConfig = InputConfig()
+
+    @model_validator(mode="after")
+    def _check_method(self) -> "Config":
+        if self.method not in METHODS:
+            raise ValueError(f"method: unknown method {self.method!r} (one of {', '.join(METHODS)})")
+        return self
+
+
+class ConfigError(ValueError):
+    """A configuration problem; the message names the key (dotted path) and the file."""
+
+
+def _format(err: ValidationError, source: str) -> str:
+    lines = []
+    for e in err.errors():
+        key = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        lines.append(f"{source}: {key}: {msg}")
+    return "\n".join(lines)
+
+
+def config_from_dict(data: dict[str, Any], source: str = "config") -> Config:
+    """Validate a mapping into a :class:`Config`; raises :class:`ConfigError` naming each bad key."""
+    try:
+        return Config.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(_format(e, source)) from None
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Load ``path`` (TOML) over the defaults; ``None`` gives the defaults."""
+    if path is None:
+        return Config()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    return config_from_dict(data, str(p))

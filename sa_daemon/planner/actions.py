@@ -1,0 +1,107 @@
+"""High-level actions and their velocity commands (section III-B).
+
+* move-to-goal ``g``: proportional twist toward ``k_c``, saturated (translation along ``k_c - x``, rotation
+  along the axis-angle of the relative rotation);
+* HO: the belief-weighted negative gradient of the goals' ``Q`` (:mod:`.huber`);
+* no-assist: zero robot twist, the user's twist passes unscaled;
+* question: the robot holds still while the question is asked.
+
+Move actions are blended ``a_total = (1 - alpha) a_h + alpha a_r``; ``a_h`` holds only the components of
+the current joystick mode, the robot twist all six.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from ..config import BlendConfig, MoveConfig
+from ..geometry import FloatArray, rotation_error
+
+
+class ActionKind(str, Enum):
+    MOVE = "move"
+    HO = "ho"
+    NONE = "none"
+    QUESTION = "question"
+
+
+class Mode(str, Enum):
+    """Joystick mode: the 3 axes drive either translation or rotation."""
+
+    TRANSLATION = "translation"
+    ROTATION = "rotation"
+
+
+@dataclass(frozen=True)
+class Action:
+    """A high-level action. ``goal`` indexes the goal set for moves; ``target`` names the high-level
+    target of a move or a question."""
+
+    kind: ActionKind
+    goal: int | None = None
+    target: str | None = None
+
+    @property
+    def label(self) -> str:
+        """Short human form: ``move cup:top``, ``ho``, ``none``, ``ask cup:top``."""
+        if self.kind is ActionKind.MOVE:
+            return f"move {self.target}"
+        if self.kind is ActionKind.QUESTION:
+            return f"ask {self.target}"
+        return self.kind.value
+
+    def to_dict(self) -> dict:
+        d: dict = {"kind": self.kind.value}
+        if self.target is not None:
+            d["goal"] = self.target
+        if self.goal is not None:
+            d["goal_index"] = self.goal
+        return d
+
+
+NO_ASSIST = Action(ActionKind.NONE)
+HO_ACTION = Action(ActionKind.HO)
+
+
+def mask_to_mode(twist: FloatArray, mode: Mode) -> FloatArray:
+    """Keep only the components the joystick mode drives (the others become 0)."""
+    t = np.array(twist, dtype=float)
+    if Mode(mode) is Mode.TRANSLATION:
+        t[..., 3:] = 0.0
+    else:
+        t[..., :3] = 0.0
+    return t
+
+
+def _clip_norm(v: FloatArray, limit: float) -> FloatArray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v * np.minimum(1.0, limit / np.maximum(n, 1e-12))
+
+
+def move_twist(
+    position: FloatArray, quat: FloatArray, goal_position: FloatArray, goal_quat: FloatArray, cfg: MoveConfig
+) -> FloatArray:
+    """Twist (m/s, rad/s) toward a desired pose: gain times the error, each part norm-saturated.
+
+    Broadcasts, so many (pose, goal) pairs are computed in one call.
+    """
+    lin = _clip_norm(cfg.linear_gain * (np.asarray(goal_position) - position), cfg.linear_max_mps)
+    ang = _clip_norm(cfg.angular_gain * rotation_error(goal_quat, quat), cfg.angular_max_radps)
+    return np.concatenate((lin, ang), axis=-1)
+
+
+def ho_twist(weights: FloatArray, gradients: FloatArray) -> FloatArray:
+    """Belief-weighted mean of per-goal assistance twists: ``sum_g b(g) grad_g / sum_g b(g)``.
+
+    ``weights`` ``(..., G)``, ``gradients`` ``(..., G, 6)``.
+    """
+    w = np.asarray(weights, dtype=float)
+    return np.einsum("...g,...gj->...j", w, gradients) / np.sum(w, axis=-1, keepdims=True)
+
+
+def blend(user_twist: FloatArray, robot_twist: FloatArray, cfg: BlendConfig) -> FloatArray:
+    """``(1 - alpha) a_h + alpha a_r``."""
+    return (1.0 - cfg.alpha) * np.asarray(user_twist) + cfg.alpha * np.asarray(robot_twist)

@@ -1,0 +1,173 @@
+"""Belief over goals: MaxEnt IOC joystick updates, answers to questions, resampling (sections III-D, F, G).
+
+A :class:`Belief` is immutable: every update returns a new one, so the daemon can hand the current
+belief to the planner worker while the control loop keeps updating its own.
+
+Resampling (``docs/model.md`` explains the choice): when ``N_eff = 1 / sum p^2 < |G| / 2`` each high-level
+target ``T`` is given ``n_T = clip(round(p_T * N_targets), 1, K_T)`` goals, its grasp poses sorted by
+distance to the gripper and redistributed so that copy ``i < n_T - 1`` owns the ``i``-th closest pose and
+the last copy owns the rest (paper Fig. 2), each copy carrying ``p_T / n_T``. Unlike a plain particle
+resampler, every target keeps at least one goal and its probability, so evidence is never thrown away
+and a wrong belief can still be corrected. Resampling only happens when the allocation would change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from scipy.special import logsumexp
+
+from ..config import IntentConfig
+from ..geometry import FloatArray, Pose
+from .goals import Goal
+from .goalset import GoalSet
+from .huber import q_minus_v
+
+
+def _check_finite(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf: refused")
+    return arr
+
+
+def cap_probabilities(p: FloatArray, cap: float) -> FloatArray:
+    """Clamp any probability above ``cap`` to ``cap`` and spread the excess equally over the others."""
+    p = np.array(p, dtype=float)
+    if len(p) < 2:
+        return p
+    i = int(np.argmax(p))
+    if p[i] > cap:
+        excess = p[i] - cap
+        p[i] = cap
+        others = np.arange(len(p)) != i
+        p[others] += excess / (len(p) - 1)
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class Belief:
+    """Goals and their normalised log-probabilities."""
+
+    goals: GoalSet
+    log_p: FloatArray
+
+    def __post_init__(self) -> None:
+        lp = np.array(self.log_p, dtype=float)
+        if lp.shape != (len(self.goals),):
+            raise ValueError("log_p must have one entry per goal")
+        lp.setflags(write=False)
+        object.__setattr__(self, "log_p", lp)
+
+    @classmethod
+    def uniform(cls, goals: GoalSet | tuple[Goal, ...] | list[Goal]) -> "Belief":
+        """Uniform prior over ``goals``."""
+        gs = goals if isinstance(goals, GoalSet) else GoalSet(tuple(goals))
+        return cls(gs, np.full(len(gs), -np.log(len(gs))))
+
+    @classmethod
+    def from_probs(cls, goals: GoalSet, probs: FloatArray) -> "Belief":
+        """Belief with the given probabilities (normalised; zeros allowed)."""
+        p = _check_finite("probs", probs, (len(goals),))
+        if np.any(p < 0) or p.sum() <= 0:
+            raise ValueError("probabilities must be non-negative with a positive sum")
+        with np.errstate(divide="ignore"):
+            return cls(goals, np.log(p / p.sum()))
+
+    @cached_property
+    def probs(self) -> FloatArray:
+        """Probabilities of the goals, ``(G,)``, summing to 1."""
+        p = np.exp(self.log_p)
+        p.setflags(write=False)
+        return p
+
+    @property
+    def n_eff(self) -> float:
+        """Kish's effective sample size ``1 / sum p^2``."""
+        return float(1.0 / np.sum(self.probs**2))
+
+    def target_probabilities(self) -> dict[str, float]:
+        """Probability of each high-level target: what users and metrics see."""
+        return self.goals.target_probabilities(self.probs)
+
+    def _normalised(self, log_p: FloatArray, cap: float) -> "Belief":
+        log_p = log_p - logsumexp(log_p)
+        p = np.exp(log_p)
+        if p.max() > cap:
+            with np.errstate(divide="ignore"):
+                log_p = np.log(cap_probabilities(p, cap))
+        return Belief(self.goals, log_p)
+
+    def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> "Belief":
+        """MaxEnt IOC update from one joystick sample: ``log b(g) -= Q_g(x, u) - V_g(x)``.
+
+        ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
+        every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
+        """
+        u = _check_finite("user_twist", user_twist, (6,))
+        nll = q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
+        return self._normalised(self.log_p - nll, cfg.cap)
+
+    def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
+        """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
+        match = np.array([g.target == target for g in self.goals.goals])
+        p_yes = np.where(match, p_correct, 1.0 - p_correct)
+        return p_yes if yes else 1.0 - p_yes
+
+    def after_answer(self, target: str, yes: bool, cfg: IntentConfig) -> "Belief":
+        """Bayes update from a yes/no answer to "is ``target`` your goal?"."""
+        if target not in self.goals.targets:
+            raise ValueError(f"unknown target {target!r}")
+        like = self.answer_likelihood(target, yes, cfg.answer_p_correct)
+        return self._normalised(self.log_p + np.log(like), cfg.cap)
+
+    # -- resampling and redistribution (section III-G) -------------------------------------------------
+
+    def copy_allocation(self) -> dict[str, int]:
+        """Number of goals each target would get if resampled now."""
+        tp = self.target_probabilities()
+        pool = self._pose_pools()
+        n = len(tp)
+        return {t: int(np.clip(np.floor(p * n + 0.5), 1, len(pool[t]))) for t, p in tp.items()}
+
+    def current_allocation(self) -> dict[str, int]:
+        """Number of goals each target has now."""
+        counts = np.bincount(self.goals.target_index, minlength=len(self.goals.targets))
+        return {t: int(c) for t, c in zip(self.goals.targets, counts)}
+
+    def _pose_pools(self) -> dict[str, list[Pose]]:
+        pools: dict[str, list[Pose]] = {t: [] for t in self.goals.targets}
+        for g in self.goals.goals:
+            pools[g.target].extend(g.poses)
+        return pools
+
+    def needs_resampling(self) -> bool:
+        """``N_eff < |G| / 2`` and resampling would change the allocation of goals to targets."""
+        return self.n_eff < len(self.goals) / 2 and self.copy_allocation() != self.current_allocation()
+
+    def resampled(self, pose: Pose, cfg: IntentConfig) -> "Belief":
+        """Resample and redistribute grasp poses if :meth:`needs_resampling`, else return ``self``."""
+        if not cfg.resample or not self.needs_resampling():
+            return self
+        tp = self.target_probabilities()
+        alloc = self.copy_allocation()
+        pools = self._pose_pools()
+        first = {}
+        for g in self.goals.goals:
+            first.setdefault(g.target, g)
+        goals: list[Goal] = []
+        probs: list[float] = []
+        for t in self.goals.targets:
+            template, n = first[t], alloc[t]
+            poses = pools[t]
+            d = template.with_poses(tuple(poses)).pose_distances(pose, cfg.rotation_weight_m_per_rad)
+            order = [poses[i] for i in np.argsort(d, kind="stable")]
+            for i in range(n):
+                own = order[i:] if i == n - 1 else [order[i]]
+                goals.append(template.with_poses(tuple(own)))
+                probs.append(tp[t] / n)
+        return Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))

@@ -1,0 +1,82 @@
+"""An ordered set of goals packed into padded arrays for vectorised evaluation.
+
+Goals own different numbers of grasp poses; the arrays are padded to ``(G, K_max, ...)`` with poses
+1 km away (and identity orientation) so that any min-distance or min-value reduction ignores the padding
+without a mask.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..geometry import FloatArray, Pose, quat_angle
+from .goals import Goal
+
+PAD_DISTANCE_M = 1000.0
+
+
+@dataclass(frozen=True, eq=False)
+class GoalSet:
+    """Goals in a fixed order with padded pose arrays and the high-level target of each goal."""
+
+    goals: tuple[Goal, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "goals", tuple(self.goals))
+        if not self.goals:
+            raise ValueError("a goal set needs at least one goal")
+
+    def __len__(self) -> int:
+        return len(self.goals)
+
+    @cached_property
+    def positions(self) -> FloatArray:
+        """``(G, K, 3)`` grasp positions (m), padded far away."""
+        k = max(len(g.poses) for g in self.goals)
+        out = np.full((len(self.goals), k, 3), PAD_DISTANCE_M)
+        for i, g in enumerate(self.goals):
+            out[i, : len(g.poses)] = g.positions
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def quats_wxyz(self) -> FloatArray:
+        """``(G, K, 4)`` grasp orientations, padded with identity."""
+        k = max(len(g.poses) for g in self.goals)
+        out = np.zeros((len(self.goals), k, 4))
+        out[..., 0] = 1.0
+        for i, g in enumerate(self.goals):
+            out[i, : len(g.poses)] = g.quats_wxyz
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def targets(self) -> tuple[str, ...]:
+        """Distinct high-level targets in order of first appearance."""
+        return tuple(dict.fromkeys(g.target for g in self.goals))
+
+    @cached_property
+    def target_index(self) -> np.ndarray:
+        """``(G,)`` index into :attr:`targets` of each goal's high-level target."""
+        pos = {t: i for i, t in enumerate(self.targets)}
+        return np.array([pos[g.target] for g in self.goals], dtype=int)
+
+    def desired_indices(self, pose: Pose, rotation_weight_m_per_rad: float) -> np.ndarray:
+        """Index of ``k_c`` (closest grasp pose, ``d_trans + w d_rot``) within each goal, ``(G,)``."""
+        d = np.linalg.norm(self.positions - pose.position, axis=-1)
+        d = d + rotation_weight_m_per_rad * quat_angle(self.quats_wxyz, pose.quat_wxyz)
+        return np.argmin(d, axis=-1)
+
+    def desired_poses(self, pose: Pose, rotation_weight_m_per_rad: float) -> tuple[FloatArray, FloatArray]:
+        """``k_c`` of every goal as arrays ``((G, 3), (G, 4))``."""
+        k = self.desired_indices(pose, rotation_weight_m_per_rad)
+        rows = np.arange(len(self.goals))
+        return self.positions[rows, k], self.quats_wxyz[rows, k]
+
+    def target_probabilities(self, probs: FloatArray) -> dict[str, float]:
+        """Probability of each high-level target (summed over its copies)."""
+        sums = np.bincount(self.target_index, weights=probs, minlength=len(self.targets))
+        return {t: float(p) for t, p in zip(self.targets, sums)}

@@ -1,0 +1,128 @@
+"""Goal-conditioned Huber value functions and the hindsight-optimisation (HO) gradient.
+
+Facts from Javdani, Srinivasa and Bagnell, "Shared autonomy via hindsight optimization" (RSS 2015) and
+their published implementation (see ``docs/model.md``):
+
+* ``V(d) = 0.5 (c/delta) d^2 + a d`` for ``d <= delta``, ``(c + a) d - c delta / 2`` beyond; translation
+  uses d in m, rotation the quaternion angle in rad with the term scaled by ``weight`` (0.07);
+* the step cost of applying an action for ``T`` s is ``T`` times the slope of ``V`` at the current distance;
+* ``Q_g(x, u) = cost(x) + V_g(x')`` with ``x'`` the pose after the user's twist ``u`` for ``T`` s;
+* a goal with several grasp poses takes ``V`` and ``Q`` from its lowest-value pose;
+* the HO robot twist is the belief-weighted negative gradient of ``Q`` with respect to the action,
+  scaled by the robot cost multipliers and shrunk near the goal.
+
+All functions broadcast: positions ``(..., 3)``, quaternions ``(..., 4)``; goal arrays come padded as
+``(G, K, ...)`` (see :class:`~sa_daemon.planner.goalset.GoalSet`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import HOConfig, HuberConfig, IntentConfig
+from ..geometry import FloatArray, integrate_pose, quat_angle, rotation_error
+
+
+def huber_value(d: FloatArray, h: HuberConfig) -> FloatArray:
+    """``weight * V(d)``: quadratic inside ``delta``, linear beyond (units of cost)."""
+    d = np.asarray(d, dtype=float)
+    quad = 0.5 * (h.c / h.delta) * d * d + h.a * d
+    lin = (h.c + h.a) * d - 0.5 * h.c * h.delta
+    return h.weight * np.where(d <= h.delta, quad, lin)
+
+
+def huber_slope(d: FloatArray, h: HuberConfig) -> FloatArray:
+    """``weight * dV/dd`` (cost per m or per rad)."""
+    d = np.asarray(d, dtype=float)
+    return h.weight * np.where(d <= h.delta, (h.c / h.delta) * d + h.a, h.c + h.a)
+
+
+def pose_values(
+    positions: FloatArray, quats: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig
+) -> FloatArray:
+    """Value ``V`` of gripper pose(s) w.r.t. each grasp pose (broadcast shapes)."""
+    d_t = np.linalg.norm(goal_positions - positions, axis=-1)
+    d_r = quat_angle(goal_quats, quats)
+    return huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
+
+
+def q_minus_v(
+    position: FloatArray,
+    quat: FloatArray,
+    user_twist: FloatArray,
+    goal_positions: FloatArray,
+    goal_quats: FloatArray,
+    cfg: IntentConfig,
+) -> FloatArray:
+    """``Q_g(x, u) - V_g(x)`` for every goal, the MaxEnt IOC negative log-likelihood of ``u``.
+
+    ``goal_positions`` is ``(G, K, 3)``; the goal's ``V`` and ``Q`` come from its lowest-value pose.
+    Returns shape ``(G,)``.
+    """
+    T = cfg.action_apply_time_s
+    d_t = np.linalg.norm(goal_positions - position, axis=-1)  # (G, K)
+    d_r = quat_angle(goal_quats, quat)
+    v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
+    k = np.argmin(v, axis=-1)  # lowest-value pose per goal
+    rows = np.arange(v.shape[0])
+    p1, q1 = integrate_pose(position, quat, user_twist, T)
+    gp, gq = goal_positions[rows, k], goal_quats[rows, k]
+    d_t1 = np.linalg.norm(gp - p1, axis=-1)
+    d_r1 = quat_angle(gq, q1)
+    cost = T * (huber_slope(d_t[rows, k], cfg.translation) + huber_slope(d_r[rows, k], cfg.rotation))
+    q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
+    return q_val - v[rows, k]
+
+
+def assistance_twists(
+    position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
+    intent: IntentConfig, ho: HOConfig,
+) -> FloatArray:
+    """Negative ``Q`` gradient toward one pose per goal, as a twist (m/s, rad/s).
+
+    ``position`` ``(..., 1, 3)`` and ``quat`` ``(..., 1, 4)`` against goal poses ``(..., G, 3)`` and
+    ``(..., G, 4)``; returns ``(..., G, 6)``. Magnitude: the Huber slope divided by the robot's cost
+    multiplier, shrunk linearly inside ``translation_shrink_m`` / ``rotation_shrink_rad``.
+    """
+    diff = goal_positions - position
+    d_t = np.sqrt(np.sum(diff * diff, axis=-1))
+    axis = rotation_error(goal_quats, quat)  # |axis| = d_r
+    d_r = np.sqrt(np.sum(axis * axis, axis=-1))
+    lin_mag = huber_slope(d_t, intent.translation) / ho.translation_cost_multiplier
+    lin_mag = lin_mag * np.minimum(1.0, d_t / ho.translation_shrink_m) / np.maximum(d_t, 1e-12)
+    rot_mag = huber_slope(d_r, intent.rotation) / ho.rotation_cost_multiplier
+    rot_mag = rot_mag * np.minimum(1.0, d_r / ho.rotation_shrink_rad) / np.maximum(d_r, 1e-12)
+    return np.concatenate((diff * lin_mag[..., None], axis * rot_mag[..., None]), axis=-1)
+
+
+def goal_gradients(
+    position: FloatArray,
+    quat: FloatArray,
+    user_twist: FloatArray,
+    goal_positions: FloatArray,
+    goal_quats: FloatArray,
+    intent: IntentConfig,
+    ho: HOConfig,
+) -> FloatArray:
+    """Per-goal assistance twist ``-dQ_g/du`` (m/s, rad/s), shape ``(..., G, 6)``.
+
+    Evaluated at ``x'``, the pose after the user's twist for ``action_apply_time_s`` (where the gradient
+    of ``Q`` w.r.t. the action is taken). Goal arrays are ``(G, K, ...)``: each goal's gradient points to
+    its lowest-value pose. ``(G, 3)``/``(G, 4)`` arrays give one pose per goal (used by the lookahead).
+    ``position`` may carry leading batch axes ``(B, 3)`` to evaluate many candidate poses at once.
+    """
+    p1, q1 = integrate_pose(position, quat, user_twist, intent.action_apply_time_s)
+    p1 = p1[..., None, :]
+    q1 = q1[..., None, :]
+    if goal_positions.ndim == 3:  # (G, K, .): pick each goal's lowest-value pose
+        v = pose_values(p1[..., None, :], q1[..., None, :], goal_positions, goal_quats, intent)
+        k = np.argmin(v, axis=-1)
+        rows = np.arange(goal_positions.shape[0])
+        goal_positions, goal_quats = goal_positions[rows, k], goal_quats[rows, k]
+    return assistance_twists(p1, q1, goal_positions, goal_quats, intent, ho)
+
+
+def max_gradient_speeds(intent: IntentConfig, ho: HOConfig) -> tuple[float, float]:
+    """Largest possible HO twist norms (m/s, rad/s): the gradient's linear-region magnitude."""
+    t, r = intent.translation, intent.rotation
+    return t.weight * (t.c + t.a) / ho.translation_cost_multiplier, r.weight * (r.c + r.a) / ho.rotation_cost_multiplier

@@ -1,0 +1,159 @@
+"""The POMDP model of the paper as one pure object, shared by the planner, the evaluation and the daemon.
+
+It holds no state of its own beyond its configuration: the belief, the pose and the user's twist are
+passed in. It answers
+
+* how the belief changes (joystick input, answers, resampling) - observation model, section III-D;
+* which actions exist (top ``G_m`` goals, method) - section III-B;
+* what twist an action commands now, blended with the user's - the velocity command generator;
+* what an action is worth - the reward, section III-E (with the lookahead rollouts in :mod:`.problem`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Config
+from ..geometry import FloatArray, Pose, quat_angle
+from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind, blend, ho_twist, move_twist
+from .belief import Belief
+from .goalset import GoalSet
+from .huber import goal_gradients
+from .methods import MethodSpec, method_spec
+from .reward import opposes
+
+ZERO_TWIST = np.zeros(6)
+
+
+@dataclass(frozen=True)
+class Command:
+    """What one control tick sends: the action actually applied (``ho+noassist`` may turn HO into
+    no-assist), the robot's twist, the blended total (m/s, rad/s) and whether the robot opposed the user."""
+
+    action: Action
+    robot_twist: FloatArray
+    total_twist: FloatArray
+    opposed: bool
+
+
+class SharedAutonomyModel:
+    """Transition, observation and reward of the shared-autonomy POMDP (pure; see module doc)."""
+
+    def __init__(self, cfg: Config | None = None) -> None:
+        self.cfg = cfg or Config()
+
+    # -- belief (observation model) ----------------------------------------------------------------------
+
+    def initial_belief(self, goals: GoalSet | tuple) -> Belief:
+        """Uniform prior over the scene's goals."""
+        return Belief.uniform(goals)
+
+    def update_input(self, belief: Belief, pose: Pose, user_twist: FloatArray) -> Belief:
+        """Joystick observation at one input sample, then resampling if it is due."""
+        return belief.after_input(pose, user_twist, self.cfg.intent).resampled(pose, self.cfg.intent)
+
+    def update_answer(self, belief: Belief, target: str, yes: bool) -> Belief:
+        """Answer observation ("yes"/"no" to the question about ``target``)."""
+        return belief.after_answer(target, yes, self.cfg.intent)
+
+    # -- actions -------------------------------------------------------------------------------------------
+
+    def candidate_goals(self, goals: GoalSet, probs: FloatArray, pose: Pose) -> np.ndarray:
+        """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper."""
+        kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+        dist = np.linalg.norm(kp - pose.position, axis=-1)
+        dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
+        order = np.lexsort((dist, -np.asarray(probs)))
+        return order[: self.cfg.planner.top_goals]
+
+    def action_set(
+        self, method: str | MethodSpec, goals: GoalSet, probs: FloatArray, pose: Pose, asked: frozenset[str]
+    ) -> tuple[list[Action], list[Action]]:
+        """(move actions, question actions) available to a planned method.
+
+        Move-to-goal and questions for the top ``G_m`` goals (questions deduplicated by high-level target
+        and never about a target already asked: a repeated question costs ``repeated_question`` and is
+        left out of the search), plus HO and no-assist as the method allows.
+        """
+        spec = method if isinstance(method, MethodSpec) else method_spec(method)
+        cands = self.candidate_goals(goals, probs, pose)
+        moves: list[Action] = []
+        if spec.moves:
+            moves += [Action(ActionKind.MOVE, int(i), goals.goals[i].target) for i in cands]
+        if spec.ho:
+            moves.append(HO_ACTION)
+        if spec.noassist:
+            moves.append(NO_ASSIST)
+        questions: list[Action] = []
+        if spec.questions:
+            seen: set[str] = set(asked)
+            for i in cands:
+                t = goals.goals[i].target
+                if t not in seen:
+                    seen.add(t)
+                    questions.append(Action(ActionKind.QUESTION, None, t))
+        return moves, questions
+
+    def fixed_action(self, method: str, goals: GoalSet, probs: FloatArray) -> Action:
+        """The action of a rule-based baseline (``manual``, ``ho``, ``ho+noassist``, ``blend``)."""
+        spec = method_spec(method)
+        if spec.planned:
+            raise ValueError(f"method {method!r} is planned, not rule-based")
+        if spec.name == "manual":
+            return NO_ASSIST
+        if spec.name in ("ho", "ho+noassist"):
+            return HO_ACTION
+        tp = goals.target_probabilities(np.asarray(probs))
+        ranked = sorted(tp.values(), reverse=True) + [0.0]
+        if ranked[0] - ranked[1] > self.cfg.blend.predict_margin:
+            top = max(tp, key=tp.__getitem__)
+            copies = [i for i, g in enumerate(goals.goals) if g.target == top]
+            i = max(copies, key=lambda j: probs[j])
+            return Action(ActionKind.MOVE, int(i), top)
+        return NO_ASSIST
+
+    # -- velocity commands ---------------------------------------------------------------------------------
+
+    def robot_twist(
+        self, action: Action, goals: GoalSet, probs: FloatArray, pose: Pose, user_twist: FloatArray
+    ) -> FloatArray:
+        """The robot's twist ``a_r`` (m/s, rad/s) for ``action`` at ``pose``."""
+        if action.kind is ActionKind.MOVE:
+            if action.goal is None or not 0 <= action.goal < len(goals):
+                raise ValueError(f"move action needs a goal index in range, got {action.goal}")
+            kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+            return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
+        if action.kind is ActionKind.HO:
+            grads = goal_gradients(
+                pose.position, pose.quat_wxyz, user_twist, goals.positions, goals.quats_wxyz,
+                self.cfg.intent, self.cfg.ho,
+            )
+            return ho_twist(np.asarray(probs), grads)
+        return ZERO_TWIST.copy()
+
+    def command(
+        self,
+        action: Action,
+        goals: GoalSet,
+        probs: FloatArray,
+        pose: Pose,
+        user_twist: FloatArray,
+        method: str = "policy",
+    ) -> Command:
+        """Blend ``action``'s robot twist with the user's twist (current mode only).
+
+        No-assist passes the user's twist unscaled; a question holds the robot still; ``ho+noassist``
+        falls back to no-assist whenever HO opposes the user.
+        """
+        u = np.asarray(user_twist, dtype=float)
+        if action.kind is ActionKind.QUESTION:
+            return Command(action, ZERO_TWIST.copy(), ZERO_TWIST.copy(), False)
+        if action.kind is ActionKind.NONE:
+            return Command(action, ZERO_TWIST.copy(), u.copy(), False)
+        r = self.robot_twist(action, goals, probs, pose, u)
+        opposed = bool(opposes(u, r, self.cfg.reward.opposition_threshold))
+        if opposed and method == "ho+noassist":
+            return Command(NO_ASSIST, ZERO_TWIST.copy(), u.copy(), False)
+        return Command(action, r, blend(u, r, self.cfg.blend), opposed)

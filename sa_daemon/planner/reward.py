@@ -1,0 +1,61 @@
+"""Reward of section III-E, vectorised over goals and candidate poses.
+
+``R(s, move) = R_d + R_u`` with ``R_t = -scale (1 - 2^(-beta d_trans))``, ``R_r = -scale d_rot / (2 pi)``
+added when ``d_trans <= delta``, ``+goal`` when the pose reaches ``k_c`` (within ``goal_translation_m`` and
+``goal_rotation_rad``), and ``R_u = opposition_penalty`` when the robot's twist opposes the user's.
+Questions cost ``question``, repeated questions ``repeated_question``. Values are in reward units.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import RewardConfig
+from ..geometry import FloatArray
+
+
+def distance_reward(d_trans: FloatArray, d_rot: FloatArray, cfg: RewardConfig) -> FloatArray:
+    """``R_d`` plus the goal bonus for translation ``d_trans`` (m) and rotation ``d_rot`` (rad) to ``k_c``."""
+    d_trans = np.asarray(d_trans, dtype=float)
+    d_rot = np.asarray(d_rot, dtype=float)
+    r_t = -cfg.scale * (1.0 - np.exp2(-cfg.beta * d_trans))
+    r_r = np.where(d_trans <= cfg.rotation_threshold_m, -cfg.scale * d_rot / (2.0 * math.pi), 0.0)
+    reached = (d_trans <= cfg.goal_translation_m) & (d_rot <= cfg.goal_rotation_rad)
+    return r_t + r_r + np.where(reached, cfg.goal, 0.0)
+
+
+def opposes(user_twist: FloatArray, robot_twist: FloatArray, threshold: float) -> FloatArray:
+    """True where, in any of the six dimensions, the twists have opposite signs and both magnitudes
+    exceed ``threshold`` (section III-E). Broadcasts over leading axes; returns a bool array."""
+    u = np.asarray(user_twist, dtype=float)
+    r = np.asarray(robot_twist, dtype=float)
+    return np.any((u * r < 0.0) & (np.abs(u) > threshold) & (np.abs(r) > threshold), axis=-1)
+
+
+def opposition_reward(opposed: FloatArray, cfg: RewardConfig) -> FloatArray:
+    """``R_u``: the opposition penalty where ``opposed``, else 0."""
+    return np.where(opposed, cfg.opposition_penalty, 0.0)
+
+
+def question_reward(repeated: bool, cfg: RewardConfig) -> float:
+    """Reward of asking a question (``repeated``: about a target already asked)."""
+    return cfg.repeated_question if repeated else cfg.question
+
+
+def distance_reward_upper_bound(
+    d_trans_lo: FloatArray, d_trans_hi: FloatArray, d_rot_lo: FloatArray, cfg: RewardConfig
+) -> FloatArray:
+    """Largest ``R_d`` (with goal bonus) over all poses with ``d_trans`` in ``[lo, hi]`` and ``d_rot >= lo``.
+
+    ``R_d`` is not monotone in ``d_trans`` (the rotation term switches on at ``delta``), so the bound
+    takes the better of staying just outside ``delta`` and getting as close as possible.
+    """
+    lo = np.asarray(d_trans_lo, dtype=float)
+    hi = np.asarray(d_trans_hi, dtype=float)
+    r_lo = np.asarray(d_rot_lo, dtype=float)
+    near = distance_reward(lo, r_lo, cfg)
+    outside = np.maximum(lo, np.nextafter(cfg.rotation_threshold_m, np.inf))
+    far = np.where(hi > cfg.rotation_threshold_m, -cfg.scale * (1.0 - np.exp2(-cfg.beta * outside)), -np.inf)
+    return np.maximum(near, far)

@@ -1,0 +1,114 @@
+"""Planner input and output: plain, picklable records that cross the worker-process boundary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import FloatArray, Pose
+from .actions import Action, ActionKind, Mode
+from .goals import Goal
+from .goalset import GoalSet
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot:
+    """Everything the planner needs, frozen at one instant.
+
+    ``user_twist`` is the user's last commanded twist (m/s, rad/s), already holding only the components of
+    ``mode``; ``asked`` the high-level targets already asked about in this task. ``budget_s`` is the
+    wall-clock deadline (``None``: no deadline) and ``node_budget`` a deterministic cap on expanded
+    beliefs (``None``: none); with both ``None`` the planner runs to the proven optimum.
+    """
+
+    goals: GoalSet
+    probs: FloatArray
+    pose: Pose
+    user_twist: FloatArray
+    mode: Mode = Mode.TRANSLATION
+    asked: frozenset[str] = frozenset()
+    method: str = "policy"
+    budget_s: float | None = 0.1
+    node_budget: int | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.goals, GoalSet):
+            object.__setattr__(self, "goals", GoalSet(tuple(self.goals)))
+        p = np.array(self.probs, dtype=float)
+        u = np.array(self.user_twist, dtype=float)
+        if p.shape != (len(self.goals),) or not np.all(np.isfinite(p)) or np.any(p < 0) or p.sum() <= 0:
+            raise ValueError("probs must be finite, non-negative, one per goal, with a positive sum")
+        if u.shape != (6,) or not np.all(np.isfinite(u)):
+            raise ValueError("user_twist must be 6 finite numbers")
+        object.__setattr__(self, "probs", p / p.sum())
+        object.__setattr__(self, "user_twist", u)
+        object.__setattr__(self, "mode", Mode(self.mode))
+        object.__setattr__(self, "asked", frozenset(self.asked))
+
+    def to_dict(self) -> dict:
+        """Plain (JSON-ready) form."""
+        return {
+            "goals": [g.to_dict() for g in self.goals.goals],
+            "probs": self.probs.tolist(),
+            "pose": self.pose.as_dict(),
+            "user_twist": self.user_twist.tolist(),
+            "mode": self.mode.value,
+            "asked": sorted(self.asked),
+            "method": self.method,
+            "budget_s": self.budget_s,
+            "node_budget": self.node_budget,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Snapshot":
+        return cls(
+            goals=GoalSet(tuple(Goal.from_dict(g) for g in d["goals"])),
+            probs=np.asarray(d["probs"], dtype=float),
+            pose=Pose.from_dict(d["pose"]),
+            user_twist=np.asarray(d["user_twist"], dtype=float),
+            mode=Mode(d["mode"]),
+            asked=frozenset(d["asked"]),
+            method=d["method"],
+            budget_s=d["budget_s"],
+            node_budget=d["node_budget"],
+        )
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """The chosen action and the statistics of the search that chose it.
+
+    ``value`` is the expected discounted reward of the chosen policy (a proven lower bound on the optimum),
+    ``upper_bound`` a proven upper bound; ``complete`` means ``value`` is the proven optimum.
+    """
+
+    action: Action
+    value: float
+    upper_bound: float
+    depth: int
+    nodes: int
+    time_ms: float
+    complete: bool
+    root_values: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def gap(self) -> float:
+        return max(0.0, self.upper_bound - self.value)
+
+    def to_dict(self) -> dict:
+        return {
+            "action": self.action.to_dict(),
+            "label": self.action.label,
+            "value": self.value,
+            "upper_bound": self.upper_bound,
+            "gap": self.gap,
+            "depth": self.depth,
+            "nodes": self.nodes,
+            "time_ms": self.time_ms,
+            "complete": self.complete,
+        }
+
+    @property
+    def is_question(self) -> bool:
+        return self.action.kind is ActionKind.QUESTION
