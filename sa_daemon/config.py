@@ -105,6 +105,38 @@ class InputConfig(_Section):
     angular_scale_radps: float = Field(0.4, gt=0)
 
 
+class LimitsConfig(_Section):
+    """Cartesian velocity limits of the arm, applied to every command (m/s, rad/s, per axis)."""
+
+    linear_mps: float = Field(0.25, gt=0, description="per-axis linear speed limit (m/s)")
+    angular_radps: float = Field(1.0, gt=0, description="per-axis angular speed limit (rad/s)")
+
+
+class SimUserConfig(_Section):
+    """The simulated user of ``docs/simulated-user.md``."""
+
+    linear_gain: float = Field(5.0, gt=0, description="desired twist = gain * error (1/s)")
+    angular_gain: float = Field(5.0, gt=0, description="1/s")
+    reaction_delay_s: float = Field(0.15, ge=0, le=1.0, description="the user acts on the pose seen this long ago")
+    noise_std: float = Field(0.05, ge=0, le=0.5, description="Gaussian noise on each axis (joystick units)")
+    mode_switch_s: float = Field(0.5, ge=0, description="time without input to switch mode (s)")
+    answer_delay_s: float = Field(1.5, ge=0, description="time to answer a question (s)")
+    answer_error_rate: float = Field(0.0, ge=0, le=1, description="probability of a wrong answer")
+    pregrasp_standoff_m: float = Field(0.06, ge=0, description="first translate to this far back along the approach")
+    pregrasp_tolerance_m: float = Field(0.02, gt=0, description="then rotate once within this of the pre-grasp point")
+    rotation_done_rad: float = Field(math.pi / 96, gt=0, description="rotation is finished within this")
+    close_translation_m: float = Field(0.01, gt=0, description="close the gripper within this ...")
+    close_rotation_rad: float = Field(math.pi / 48, gt=0, description="... and this of the desired pose")
+    timeout_s: float = Field(100.0, gt=0, description="a trial fails after this long")
+
+
+class EvalConfig(_Section):
+    """Evaluation runs (deterministic: the planner stops at a node budget, not a clock)."""
+
+    control_hz: float = Field(40.0, gt=0, description="simulation and joystick sampling rate (Hz)")
+    node_budget: int = Field(3000, ge=1, description="belief evaluations per plan in evaluation")
+
+
 METHODS = (
     "manual",
     "ho",
@@ -128,6 +160,9 @@ class Config(_Section):
     reward: RewardConfig = RewardConfig()
     planner: PlannerConfig = PlannerConfig()
     input: InputConfig = InputConfig()
+    limits: LimitsConfig = LimitsConfig()
+    sim_user: SimUserConfig = SimUserConfig()
+    eval: EvalConfig = EvalConfig()
 
     @model_validator(mode="after")
     def _check_method(self) -> "Config":

@@ -76,7 +76,7 @@ def quat_to_rotvec(q: ArrayLike) -> FloatArray:
     q = np.where(q[..., :1] < 0.0, -q, q)
     w = np.clip(q[..., 0], -1.0, 1.0)
     v = q[..., 1:]
-    s = np.linalg.norm(v, axis=-1)
+    s = np.sqrt(np.sum(v * v, axis=-1))
     angle = 2.0 * np.arctan2(s, w)
     # angle / s -> 2 as s -> 0 (first-order expansion), avoids 0/0.
     scale = np.where(s > 1e-9, angle / np.maximum(s, _EPS), 2.0)
@@ -86,7 +86,7 @@ def quat_to_rotvec(q: ArrayLike) -> FloatArray:
 def rotvec_to_quat(r: ArrayLike) -> FloatArray:
     """Unit quaternion of a rotation vector ``r`` (rad)."""
     r = np.asarray(r, dtype=float)
-    angle = np.linalg.norm(r, axis=-1)
+    angle = np.sqrt(np.sum(r * r, axis=-1))
     half = 0.5 * angle
     # sin(half)/angle -> 0.5 as angle -> 0.
     k = np.where(angle > 1e-9, np.sin(half) / np.maximum(angle, _EPS), 0.5)
@@ -147,7 +147,7 @@ def integrate_pose(
     twist = np.asarray(twist, dtype=float)
     p = np.asarray(position, dtype=float) + twist[..., :3] * dt
     q = quat_mul(rotvec_to_quat(twist[..., 3:] * dt), quat_wxyz)
-    return p, q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return p, q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
 
 
 def rotation_error(target_quat_wxyz: ArrayLike, quat_wxyz: ArrayLike) -> FloatArray:

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.special import logsumexp
 
 from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
@@ -95,7 +94,10 @@ class Belief:
         return self.goals.target_probabilities(self.probs)
 
     def _normalised(self, log_p: FloatArray, cap: float) -> "Belief":
-        log_p = log_p - logsumexp(log_p)
+        # Stable log-sum-exp by max shift (scipy.special.logsumexp gives the same, at ~10x the call
+        # overhead on 20-element arrays; this runs at 40 Hz).
+        top = np.max(log_p)
+        log_p = log_p - (top + np.log(np.sum(np.exp(log_p - top))))
         p = np.exp(log_p)
         if p.max() > cap:
             with np.errstate(divide="ignore"):

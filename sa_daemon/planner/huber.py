@@ -60,14 +60,15 @@ def q_minus_v(
     Returns shape ``(G,)``.
     """
     T = cfg.action_apply_time_s
-    d_t = np.linalg.norm(goal_positions - position, axis=-1)  # (G, K)
+    diff = goal_positions - position
+    d_t = np.sqrt(np.sum(diff * diff, axis=-1))  # (G, K)
     d_r = quat_angle(goal_quats, quat)
     v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
     k = np.argmin(v, axis=-1)  # lowest-value pose per goal
     rows = np.arange(v.shape[0])
     p1, q1 = integrate_pose(position, quat, user_twist, T)
     gp, gq = goal_positions[rows, k], goal_quats[rows, k]
-    d_t1 = np.linalg.norm(gp - p1, axis=-1)
+    d_t1 = np.sqrt(np.sum((gp - p1) ** 2, axis=-1))
     d_r1 = quat_angle(gq, q1)
     cost = T * (huber_slope(d_t[rows, k], cfg.translation) + huber_slope(d_r[rows, k], cfg.rotation))
     q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)

@@ -114,6 +114,20 @@ class SharedAutonomyModel:
             return Action(ActionKind.MOVE, int(i), top)
         return NO_ASSIST
 
+    def remap_action(self, action: Action, old: GoalSet, new: GoalSet, pose: Pose) -> Action:
+        """Carry a move action across a resampling that replaced the goal set.
+
+        The new goal is the copy of the same high-level target that owns the old goal's ``k_c``
+        (redistribution keeps the pose objects), else that target's first copy.
+        """
+        if action.kind is not ActionKind.MOVE or old is new:
+            return action
+        w = self.cfg.intent.rotation_weight_m_per_rad
+        kc = old.goals[action.goal].desired_pose(pose, w)
+        same = [i for i, g in enumerate(new.goals) if g.target == action.target]
+        owner = [i for i in same if any(p is kc for p in new.goals[i].poses)]
+        return Action(ActionKind.MOVE, (owner or same)[0], action.target)
+
     # -- velocity commands ---------------------------------------------------------------------------------
 
     def robot_twist(

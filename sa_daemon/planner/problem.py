@@ -91,10 +91,9 @@ class Problem:
         n = beliefs.shape[0]
         pos = np.tile(self.snap.pose.position, (n, 1))
         quat = np.tile(self.snap.pose.quat_wxyz, (n, 1))
-        kp, kq = self.kp[:, None, :], self.kq[:, None, :]
         opposed = np.zeros(n, dtype=bool)
         for step in range(self.H):
-            grads = goal_gradients(pos, quat, u, kp, kq, cfg.intent, cfg.ho)
+            grads = goal_gradients(pos, quat, u, self.kp, self.kq, cfg.intent, cfg.ho)
             r = ho_twist(beliefs, grads)
             if step == 0:
                 opposed = opposes(u, r, cfg.reward.opposition_threshold)

@@ -1,0 +1,55 @@
+"""The arm interface every backend implements (kinematic, MuJoCo, xArm).
+
+Small on purpose: read the state, hold a base-frame twist until the next command, open or close the
+gripper, and - for simulated arms - advance time. Units are SI (m/s, rad/s); conversion to a vendor's
+units happens inside a driver only.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import FloatArray, Pose
+
+
+@dataclass(frozen=True)
+class ArmState:
+    """What an arm reports: TCP ``pose`` (base frame), gripper state, and a fault text or ``None``."""
+
+    pose: Pose
+    gripper_closed: bool
+    fault: str | None = None
+
+
+def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float) -> FloatArray:
+    """Scale the linear and the angular part so no axis exceeds its limit, keeping each direction."""
+    t = np.array(twist, dtype=float)
+    for part, limit in ((slice(0, 3), linear_mps), (slice(3, 6), angular_radps)):
+        peak = float(np.max(np.abs(t[part])))
+        if peak > limit:
+            t[part] *= limit / peak
+    return t
+
+
+class Arm(abc.ABC):
+    """A robot arm driven by Cartesian twists."""
+
+    name: str = "arm"
+
+    @abc.abstractmethod
+    def read(self) -> ArmState:
+        """The latest state (never blocks)."""
+
+    @abc.abstractmethod
+    def command_twist(self, twist: FloatArray) -> None:
+        """Hold ``twist`` (m/s, rad/s, base frame, 6 finite numbers) until the next command."""
+
+    @abc.abstractmethod
+    def command_gripper(self, closed: bool) -> None:
+        """Close (``True``) or open the gripper."""
+
+    def step(self, dt: float) -> None:  # noqa: B027 - real arms move on their own
+        """Advance a simulated arm by ``dt`` s under the held command (no-op for a real arm)."""

@@ -1,0 +1,40 @@
+"""A gripper-only arm that integrates the commanded twist on SE(3): fast and exact, for evaluation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import LimitsConfig
+from ..geometry import FloatArray, Pose, integrate_pose
+from .base import Arm, ArmState, limit_twist
+
+
+class KinematicArm(Arm):
+    """The TCP follows the commanded twist exactly, within the configured per-axis speed limits."""
+
+    name = "kinematic"
+
+    def __init__(self, start: Pose, limits: LimitsConfig | None = None) -> None:
+        self._limits = limits or LimitsConfig()
+        self._pos = np.array(start.position)
+        self._quat = np.array(start.quat_wxyz)
+        self._twist = np.zeros(6)
+        self._closed = False
+
+    def read(self) -> ArmState:
+        return ArmState(Pose(self._pos, self._quat), self._closed)
+
+    def command_twist(self, twist: FloatArray) -> None:
+        t = np.asarray(twist, dtype=float)
+        if t.shape != (6,) or not np.all(np.isfinite(t)):
+            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
+        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps)
+
+    def command_gripper(self, closed: bool) -> None:
+        self._closed = bool(closed)
+        if self._closed:
+            self._twist = np.zeros(6)
+
+    def step(self, dt: float) -> None:
+        if not self._closed:
+            self._pos, self._quat = integrate_pose(self._pos, self._quat, self._twist, dt)

@@ -1,0 +1,186 @@
+"""One evaluation trial: simulated user, belief, planner and arm in simulated time.
+
+Each control step (``eval.control_hz``, 40 Hz = the paper's 0.025 s joystick sampling) the user acts on
+what it sees, the belief takes the joystick sample, every ``planner.period_s`` the planner picks an action
+(deterministically: it stops at ``eval.node_budget`` belief evaluations, never at a clock), the model turns
+the action into a blended twist and the arm moves. A question stops the robot until the user answers.
+The trial ends when the user closes the gripper (success if it is at its desired pose, a pose of the
+task's goal) or at ``sim_user.timeout_s``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..arm.base import Arm
+from ..arm.kinematic import KinematicArm
+from ..config import Config
+from ..geometry import Pose
+from ..planner.actions import NO_ASSIST, Action, ActionKind
+from ..planner.belief import Belief
+from ..planner.goals import Goal
+from ..planner.model import SharedAutonomyModel
+from ..planner.scene import Scene
+from ..planner.snapshot import PlanResult, Snapshot
+from ..planner.solver import Solver
+from .user import SimulatedUser
+
+ArmFactory = Callable[[Scene, Config], Arm]
+
+
+def kinematic_arm(scene: Scene, cfg: Config) -> Arm:
+    return KinematicArm(scene.start, cfg.limits)
+
+
+@dataclass
+class Timeline:
+    """Per control step records, for plots (Fig. 4)."""
+
+    t: list[float] = field(default_factory=list)
+    belief: list[list[float]] = field(default_factory=list)  # per scene target
+    action: list[str] = field(default_factory=list)
+    opposed: list[bool] = field(default_factory=list)
+    user_twist: list[list[float]] = field(default_factory=list)
+    robot_twist: list[list[float]] = field(default_factory=list)
+    mode: list[str] = field(default_factory=list)
+
+
+@dataclass
+class TrialResult:
+    """Metrics of one trial (section IV) and, optionally, its timeline."""
+
+    scene: str
+    task: str
+    method: str
+    seed: int
+    success: bool
+    completion_time_s: float
+    mode_changes: int
+    joystick_input: float
+    opposing_pct: float
+    correct_prediction: bool
+    questions: int
+    final_target_p: float
+    plans: int
+    targets: list[str] = field(default_factory=list)
+    timeline: Timeline | None = None
+
+    def metrics(self) -> dict:
+        """The JSON record of the trial (without the timeline)."""
+        return {
+            k: getattr(self, k)
+            for k in (
+                "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes",
+                "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
+            )
+        }
+
+
+def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str) -> Pose:
+    """The user's wanted pose: the goal's pose closest to the start, or a seeded random one."""
+    if choice == "random":
+        return goal.poses[int(rng.integers(len(goal.poses)))]
+    return goal.desired_pose(start, cfg.intent.rotation_weight_m_per_rad)
+
+
+def run_trial(
+    scene: Scene,
+    task: str,
+    method: str,
+    seed: int,
+    cfg: Config,
+    arm_factory: ArmFactory = kinematic_arm,
+    record: bool = False,
+    pose_choice: str = "closest",
+    on_plan: Callable[[Snapshot, PlanResult], None] | None = None,
+) -> TrialResult:
+    """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``."""
+    rng = np.random.default_rng(seed)
+    model = SharedAutonomyModel(cfg)
+    solver = Solver(model)
+    goal = scene.goal(task)
+    dt = 1.0 / cfg.eval.control_hz
+    user = SimulatedUser(task, desired_pose(goal, scene.start, cfg, rng, pose_choice), cfg.sim_user, cfg.input, rng, dt)
+    arm = arm_factory(scene, cfg)
+    belief = model.initial_belief(scene.goals)
+    plan_every = max(1, int(round(cfg.planner.period_s / dt)))
+    asked: set[str] = set()
+    action: Action = NO_ASSIST
+    plan_goals = belief.goals
+    question: str | None = None
+    answer_at = 0.0
+    n_steps = int(np.ceil(cfg.sim_user.timeout_s / dt))
+    joystick = 0.0
+    opposed_steps = 0
+    plans = 0
+    closed = False
+    timeline = Timeline() if record else None
+    targets = scene.targets
+    step = 0
+    for step in range(n_steps):
+        t = step * dt
+        pose = arm.read().pose
+        inp = user.act(pose)
+        if inp.close:
+            arm.command_gripper(True)
+            closed = True
+            break
+        joystick += float(np.sum(np.abs(inp.axes)))
+        u = inp.twist(cfg.input)
+        belief = model.update_input(belief, pose, u)
+        if question is not None:
+            if t >= answer_at:
+                belief = model.update_answer(belief, question, user.answer(question))
+                question = None  # the action is still the question: re-plan now
+        if question is None and (step % plan_every == 0 or action.kind is ActionKind.QUESTION):
+            snap = Snapshot(
+                belief.goals, belief.probs, pose, u, inp.mode, frozenset(asked), method,
+                budget_s=None, node_budget=cfg.eval.node_budget,
+            )
+            result = solver.plan(snap)
+            plans += 1
+            if on_plan is not None:
+                on_plan(snap, result)
+            action, plan_goals = result.action, belief.goals
+            if action.kind is ActionKind.QUESTION:
+                question = action.target
+                asked.add(question)
+                answer_at = t + cfg.sim_user.answer_delay_s
+        if plan_goals is not belief.goals:
+            action, plan_goals = model.remap_action(action, plan_goals, belief.goals, pose), belief.goals
+        cmd = model.command(action, belief.goals, belief.probs, pose, u, method)
+        opposed_steps += cmd.opposed
+        arm.command_twist(cmd.total_twist)
+        arm.step(dt)
+        if timeline is not None:
+            tp = belief.target_probabilities()
+            timeline.t.append(t)
+            timeline.belief.append([tp[x] for x in targets])
+            timeline.action.append(cmd.action.label)
+            timeline.opposed.append(cmd.opposed)
+            timeline.user_twist.append(u.tolist())
+            timeline.robot_twist.append(cmd.robot_twist.tolist())
+            timeline.mode.append(inp.mode.value)
+    elapsed = (step + 1) * dt if not closed else step * dt
+    final_p = belief.target_probabilities()[task]
+    success = closed and user.at_goal(arm.read().pose)
+    return TrialResult(
+        scene=scene.name,
+        task=task,
+        method=method,
+        seed=seed,
+        success=bool(success),
+        completion_time_s=round(elapsed, 6),
+        mode_changes=user.mode_changes,
+        joystick_input=joystick,
+        opposing_pct=100.0 * opposed_steps / max(1, step + (0 if closed else 1)),
+        correct_prediction=bool(final_p > 0.7),
+        questions=len(asked),
+        final_target_p=final_p,
+        plans=plans,
+        targets=targets,
+        timeline=timeline,
+    )

@@ -1,0 +1,147 @@
+"""A simulated joystick user (``docs/simulated-user.md`` describes it completely).
+
+It knows its task and wants one grasp pose of that goal. Like the paper's users it drives one mode at a
+time: translate to a pre-grasp point behind the grasp (along the approach axis), switch to rotation and
+align the gripper, switch back and translate in. Its command is a saturated proportional twist toward
+where it wants to be, computed from the pose it saw ``reaction_delay_s`` ago, plus Gaussian noise: it
+naturally fights wrong assistance. It re-plans its mode whenever the assistance disturbs the part it is
+not driving. A mode switch costs ``mode_switch_s`` without input; questions are answered truthfully
+(or wrongly with ``answer_error_rate``) after ``answer_delay_s``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from ..config import InputConfig, SimUserConfig
+from ..geometry import FloatArray, Pose, quat_angle, rotation_error
+from ..planner.actions import Mode
+
+
+class Phase(str, Enum):
+    APPROACH = "approach"  # translate to the pre-grasp point
+    ALIGN = "align"  # rotate to the grasp orientation
+    INSERT = "insert"  # translate onto the grasp pose
+
+
+@dataclass(frozen=True)
+class UserInput:
+    """One joystick sample: raw ``axes`` in [-1, 1], the ``mode`` they drive, and button intents."""
+
+    axes: FloatArray
+    mode: Mode
+    close: bool = False
+
+    def twist(self, scale: InputConfig) -> FloatArray:
+        """The commanded twist (m/s, rad/s) of these axes in this mode."""
+        t = np.zeros(6)
+        if self.mode is Mode.TRANSLATION:
+            t[:3] = self.axes * scale.linear_scale_mps
+        else:
+            t[3:] = self.axes * scale.angular_scale_radps
+        return t
+
+
+def _saturate(v: FloatArray, limit: float) -> FloatArray:
+    n = float(np.linalg.norm(v))
+    return v if n <= limit else v * (limit / n)
+
+
+class SimulatedUser:
+    """The user model. Call :meth:`act` once per joystick sample (every ``dt`` s)."""
+
+    def __init__(
+        self,
+        task: str,
+        desired: Pose,
+        cfg: SimUserConfig,
+        scale: InputConfig,
+        rng: np.random.Generator,
+        dt: float,
+    ) -> None:
+        self.task = task
+        self.desired = desired
+        self.cfg = cfg
+        self.scale = scale
+        self.rng = rng
+        self.dt = dt
+        self.mode = Mode.TRANSLATION
+        self.phase = Phase.APPROACH
+        self.mode_changes = 0
+        self._switch_left = 0.0
+        self._seen: deque[Pose] = deque(maxlen=max(1, int(round(cfg.reaction_delay_s / dt))) + 1)
+        approach = desired.rotation[:, 2]
+        self.pregrasp = desired.position - cfg.pregrasp_standoff_m * approach
+
+    # -- perception --------------------------------------------------------------------------------------
+
+    def _errors(self, pose: Pose) -> tuple[FloatArray, float, float]:
+        """(translation error to the current target point, its norm, rotation error) as seen."""
+        target = self.pregrasp if self.phase is Phase.APPROACH else self.desired.position
+        err = target - pose.position
+        return err, float(np.linalg.norm(err)), float(quat_angle(self.desired.quat_wxyz, pose.quat_wxyz))
+
+    def at_goal(self, pose: Pose) -> bool:
+        """Within the closing tolerance of the desired pose."""
+        d_t, d_r = pose.distance(self.desired)
+        return d_t <= self.cfg.close_translation_m and d_r <= self.cfg.close_rotation_rad
+
+    # -- decisions ---------------------------------------------------------------------------------------
+
+    def _switch(self, mode: Mode) -> None:
+        if mode is not self.mode:
+            self.mode = mode
+            self.mode_changes += 1
+            self._switch_left = self.cfg.mode_switch_s
+
+    def _update_phase(self, pose: Pose) -> None:
+        c = self.cfg
+        _, dist, rot = self._errors(pose)
+        if self.phase is Phase.APPROACH and dist <= c.pregrasp_tolerance_m:
+            self.phase = Phase.ALIGN if rot > c.rotation_done_rad else Phase.INSERT
+        elif self.phase is Phase.ALIGN and rot <= c.rotation_done_rad:
+            self.phase = Phase.INSERT
+        elif self.phase is Phase.INSERT and rot > c.close_rotation_rad:
+            self.phase = Phase.ALIGN  # the assistance turned the gripper away: fix it first
+        if self.phase is not Phase.APPROACH:
+            # Pushed far off the approach line: back out to the pre-grasp point.
+            off = float(np.linalg.norm(pose.position - self.desired.position))
+            if off > c.pregrasp_standoff_m + 3 * c.pregrasp_tolerance_m:
+                self.phase = Phase.APPROACH
+        want = Mode.ROTATION if self.phase is Phase.ALIGN else Mode.TRANSLATION
+        self._switch(want)
+
+    def act(self, pose: Pose) -> UserInput:
+        """The joystick sample for this instant; ``pose`` is the true current pose."""
+        self._seen.append(pose)
+        seen = self._seen[0]  # the oldest kept pose: ``reaction_delay_s`` ago
+        if self.at_goal(pose):
+            return UserInput(np.zeros(3), self.mode, close=True)
+        if self._switch_left > 0.0:
+            self._switch_left -= self.dt
+            return UserInput(np.zeros(3), self.mode)
+        self._update_phase(seen)
+        if self._switch_left > 0.0:
+            self._switch_left -= self.dt
+            return UserInput(np.zeros(3), self.mode)
+        c = self.cfg
+        if self.mode is Mode.TRANSLATION:
+            err, _, _ = self._errors(seen)
+            axes = _saturate(c.linear_gain * err, self.scale.linear_scale_mps) / self.scale.linear_scale_mps
+        else:
+            err = rotation_error(self.desired.quat_wxyz, seen.quat_wxyz)
+            axes = _saturate(c.angular_gain * err, self.scale.angular_scale_radps) / self.scale.angular_scale_radps
+        if c.noise_std > 0.0:
+            axes = axes + self.rng.normal(0.0, c.noise_std, 3)
+        return UserInput(np.clip(axes, -1.0, 1.0), self.mode)
+
+    def answer(self, target: str) -> bool:
+        """Answer "is ``target`` your goal?" (truthful unless the error rate strikes)."""
+        truth = target == self.task
+        if self.cfg.answer_error_rate > 0.0 and self.rng.random() < self.cfg.answer_error_rate:
+            return not truth
+        return truth
