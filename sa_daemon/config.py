@@ -95,7 +95,10 @@ class PlannerConfig(_Section):
     top_goals: int = Field(10, ge=1, le=64, description="G_m: goals with move and question actions")
     budget_s: float = Field(0.1, gt=0, le=1.0, description="wall-clock budget of one plan (s)")
     period_s: float = Field(0.1, ge=0.1, le=0.3, description="planning period (s)")
-    max_questions: int = Field(10, ge=0, le=64, description="deepest chain of questions searched")
+    max_questions: int = Field(
+        5, ge=0, le=64, description="deepest chain of questions searched (the authors' HyP-DESPOT depth, 5)"
+    )
+    bound_levels: int = Field(3, ge=0, le=6, description="how far the solver refines its question bounds")
 
 
 class InputConfig(_Section):
@@ -203,6 +206,8 @@ def load_config(path: str | Path | None = None) -> Config:
         data = tomllib.loads(p.read_text())
     except FileNotFoundError:
         raise ConfigError(f"{p}: file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{p}: cannot be read: {e}") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: not valid TOML: {e}") from None
     return config_from_dict(data, str(p))

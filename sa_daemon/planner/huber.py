@@ -121,9 +121,3 @@ def goal_gradients(
         rows = np.arange(goal_positions.shape[0])
         goal_positions, goal_quats = goal_positions[rows, k], goal_quats[rows, k]
     return assistance_twists(p1, q1, goal_positions, goal_quats, intent, ho)
-
-
-def max_gradient_speeds(intent: IntentConfig, ho: HOConfig) -> tuple[float, float]:
-    """Largest possible HO twist norms (m/s, rad/s): the gradient's linear-region magnitude."""
-    t, r = intent.translation, intent.rotation
-    return t.weight * (t.c + t.a) / ho.translation_cost_multiplier, r.weight * (r.c + r.a) / ho.rotation_cost_multiplier

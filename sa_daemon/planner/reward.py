@@ -42,20 +42,3 @@ def opposition_reward(opposed: FloatArray, cfg: RewardConfig) -> FloatArray:
 def question_reward(repeated: bool, cfg: RewardConfig) -> float:
     """Reward of asking a question (``repeated``: about a target already asked)."""
     return cfg.repeated_question if repeated else cfg.question
-
-
-def distance_reward_upper_bound(
-    d_trans_lo: FloatArray, d_trans_hi: FloatArray, d_rot_lo: FloatArray, cfg: RewardConfig
-) -> FloatArray:
-    """Largest ``R_d`` (with goal bonus) over all poses with ``d_trans`` in ``[lo, hi]`` and ``d_rot >= lo``.
-
-    ``R_d`` is not monotone in ``d_trans`` (the rotation term switches on at ``delta``), so the bound
-    takes the better of staying just outside ``delta`` and getting as close as possible.
-    """
-    lo = np.asarray(d_trans_lo, dtype=float)
-    hi = np.asarray(d_trans_hi, dtype=float)
-    r_lo = np.asarray(d_rot_lo, dtype=float)
-    near = distance_reward(lo, r_lo, cfg)
-    outside = np.maximum(lo, np.nextafter(cfg.rotation_threshold_m, np.inf))
-    far = np.where(hi > cfg.rotation_threshold_m, -cfg.scale * (1.0 - np.exp2(-cfg.beta * outside)), -np.inf)
-    return np.maximum(near, far)

@@ -90,7 +90,7 @@ class PlanResult:
     nodes: int
     time_ms: float
     complete: bool
-    root_values: dict[str, float] = field(default_factory=dict)
+    root_values: dict[Action, float] = field(default_factory=dict)
 
     @property
     def gap(self) -> float:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import FloatArray
-from .actions import Action, ActionKind
+from .actions import Action
 from .methods import method_spec
 from .model import SharedAutonomyModel
 from .problem import Problem
@@ -47,20 +47,25 @@ class _Child:
     a_yes: Action
     a_no: Action
     lb: float
-    ub: float
+    ub: float  # bound within the current depth limit
+    ub_free: float  # bound if deeper questions were allowed
+    u_no: float  # bound on the value after "no" used by ``ub``
 
 
 class _Search:
-    def __init__(self, prob: Problem, deadline: float, node_budget: int | None) -> None:
+    def __init__(self, prob: Problem, deadline: float, node_budget: int | None, bound_levels: int = 3) -> None:
         self.p = prob
         self.deadline = deadline
         self.node_budget = node_budget
+        self.levels = bound_levels
         self.nodes = 0
         self.n_q = len(prob.questions)
+        self.all_asked = (1 << self.n_q) - 1
         self.max_depth = min(self.n_q, prob.cfg.planner.max_questions)
         self.m_memo: dict[tuple[int, int], tuple[float, Action]] = {}
         self.v_memo: dict[tuple[int, int, int], tuple[float, Action]] = {}
-        self.depth_cut = False
+        self.free_memo: dict[tuple[int, int], tuple[float, Action]] = {}  # values no depth limit touched
+        self.cuts = 0  # nodes where the depth limit stopped a question that might have paid
 
     def _check(self) -> None:
         if time.perf_counter() > self.deadline:
@@ -78,64 +83,144 @@ class _Search:
             self.nodes += len(todo)
         return [self.m_memo[k] for k in keys]
 
-    def can_ask(self, asked: int, depth: int) -> bool:
-        return depth > 0 and asked != (1 << self.n_q) - 1
+    def _children(self, B: FloatArray, avail: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``P(yes)`` ``(n, Q)`` and the beliefs after yes and no ``(n, Q, G)`` for beliefs ``(n, G)``."""
+        L = self.p.L_yes
+        py = B @ L.T
+        by = B[:, None, :] * L[None] / np.where(avail, py, 1.0)[..., None]
+        bn = B[:, None, :] * (1.0 - L)[None] / np.where(avail, 1.0 - py, 1.0)[..., None]
+        return py, by, bn
+
+    def _leaf_bound(self, kids: FloatArray, can_ask: np.ndarray) -> FloatArray:
+        """Cheap bound on ``V`` of beliefs ``(n, G)``: ``m`` if no question is left, else
+        ``min(U, max(m, r_q + gamma U))`` (a question's children are bounded by the linear ``U``)."""
+        p = self.p
+        u = kids @ p.U
+        m = (kids @ p.M).max(axis=1) if p.M.shape[1] else np.full(len(kids), -np.inf)
+        return np.where(can_ask, np.minimum(u, np.maximum(m, p.q_reward + p.gamma * u)), m)
+
+    def question_bounds(self, B: FloatArray, avail: np.ndarray, level: int) -> FloatArray:
+        """Upper bound ``(n, Q)`` on each question's value (then optimal play) at beliefs ``(n, G)``.
+
+        A "yes" child is bounded by :meth:`_leaf_bound` (it concentrates the belief, so that bound is
+        tight). A "no" child is refined ``level`` more times - ``min(U, max(m, best question bound))`` -
+        where the loose linear bound hurts: a spread belief losing one target at a time.
+        Unavailable questions get ``-inf``.
+        """
+        p = self.p
+        n, nq = avail.shape
+        py, by, bn = self._children(B, avail)
+        kid_avail = (avail[:, None, :] & ~np.eye(nq, dtype=bool)[None]).reshape(n * nq, nq)
+        can_ask = kid_avail.any(axis=1)
+        uy = self._leaf_bound(by.reshape(n * nq, -1), can_ask)
+        bn = bn.reshape(n * nq, -1)
+        un = self._leaf_bound(bn, can_ask)
+        if level > 0 and can_ask.any():
+            m = (bn[can_ask] @ p.M).max(axis=1) if p.M.shape[1] else np.full(int(can_ask.sum()), -np.inf)
+            deeper = self.question_bounds(bn[can_ask], kid_avail[can_ask], level - 1).max(axis=1)
+            un[can_ask] = np.minimum(un[can_ask], np.maximum(m, deeper))
+        qb = p.q_reward + p.gamma * (py * uy.reshape(n, nq) + (1.0 - py) * un.reshape(n, nq))
+        return np.where(avail, qb, -np.inf)
+
+    def questions_can_pay(self, b: FloatArray, avail: np.ndarray, m: float, levels: int) -> bool:
+        """False if no question can beat ``m`` at any depth (bounds deepened until proven or spent)."""
+        for level in range(levels + 1):
+            if self.question_bounds(b[None], avail, level).max() <= m:
+                return False
+        return True
 
     def expand(self, b: FloatArray, asked: int, yes: int, depth: int) -> list[_Child]:
+        """Children of a node, each question with exact one-step and bounded full values, best first."""
         p, g = self.p, self.p.gamma
-        qs = [q for q in range(self.n_q) if not asked >> q & 1]
-        L = p.L_yes[qs]
-        p_yes = L @ b
-        b_yes = L * b / p_yes[:, None]
-        b_no = (1.0 - L) * b / (1.0 - p_yes)[:, None]
+        avail = np.array([[not asked >> q & 1 for q in range(self.n_q)]])
+        qs = np.flatnonzero(avail[0])
+        py, by, bn = self._children(b[None], avail)
         keys, beliefs = [], []
-        for j, q in enumerate(qs):
+        for q in qs:
             keys += [(asked | 1 << q, yes | 1 << q), (asked | 1 << q, yes)]
-            beliefs += [b_yes[j], b_no[j]]
+            beliefs += [by[0, q], bn[0, q]]
         mv = self.move_values(keys, beliefs)
-        u_yes, u_no = b_yes @ p.U, b_no @ p.U
-        deeper = depth - 1 > 0 and len(qs) > 1
+        can_ask = np.array([len(qs) > 1])
         out = []
         for j, q in enumerate(qs):
             (my, ay), (mn, an) = mv[2 * j], mv[2 * j + 1]
-            if deeper:
-                uy = min(u_yes[j], max(my, p.q_reward + g * u_yes[j]))
-                un = min(u_no[j], max(mn, p.q_reward + g * u_no[j]))
+            pq = float(py[0, q])
+            lb = p.q_reward + g * (pq * my + (1 - pq) * mn)
+            uy = max(my, float(self._leaf_bound(by[0, q][None], can_ask)[0]))
+            un = max(mn, float(self._leaf_bound(bn[0, q][None], can_ask)[0]))
+            free = p.q_reward + g * (pq * uy + (1 - pq) * un)
+            if depth > 1:
+                out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, free, free, un))
             else:
-                uy, un = my, mn
-            lb = p.q_reward + g * (p_yes[j] * my + (1 - p_yes[j]) * mn)
-            ub = p.q_reward + g * (p_yes[j] * uy + (1 - p_yes[j]) * un)
-            out.append(_Child(q, float(p_yes[j]), b_yes[j], b_no[j], my, mn, ay, an, lb, ub))
+                out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, lb, free, mn))
         out.sort(key=lambda c: -c.lb)
         return out
 
     def value(
-        self, b: FloatArray, asked: int, yes: int, depth: int, m: float, m_act: Action, root: dict | None = None
-    ) -> tuple[float, Action]:
-        """Exact value of the depth-limited problem at the belief reached by answers ``(asked, yes)``."""
+        self,
+        b: FloatArray,
+        asked: int,
+        yes: int,
+        depth: int,
+        m: float,
+        m_act: Action,
+        alpha: float = -math.inf,
+        root: dict | None = None,
+    ) -> tuple[float, Action, bool]:
+        """Value of the depth-limited problem at the belief reached by answers ``(asked, yes)``.
+
+        Returns ``(v, action, exact)``. With a threshold ``alpha`` the search may stop once it proves
+        ``V <= alpha`` (fail-low): then ``exact`` is False and ``v`` is an upper bound ``<= alpha``.
+        """
+        free = self.free_memo.get((asked, yes))
+        if free is not None:
+            return free[0], free[1], True
         key = (asked, yes, depth)
-        if key in self.v_memo:
-            return self.v_memo[key]
+        hit = self.v_memo.get(key)
+        if hit is not None and (hit[2] or hit[0] <= alpha):
+            return hit
         self._check()
         p = self.p
         best, act = m, m_act
-        if asked != (1 << self.n_q) - 1 and p.q_reward + p.gamma * float(b @ p.U) > m:
-            if depth == 0:
-                self.depth_cut = True
+        bound = -math.inf  # upper bound of the questions not valued exactly
+        cuts = self.cuts
+        if asked != self.all_asked and p.q_reward + p.gamma * float(b @ p.U) > max(m, alpha):
+            avail = np.array([[not asked >> q & 1 for q in range(self.n_q)]])
+            # Deep bounds pay at the root; inner nodes are many and their deep bounds rarely prune.
+            levels = self.levels if asked == 0 else min(1, self.levels)
+            if not self.questions_can_pay(b, avail, max(m, alpha), levels):
+                pass  # no question can beat the threshold, at any depth
+            elif depth == 0:
+                self.cuts += 1
+                bound = math.inf
             else:
                 for c in self.expand(b, asked, yes, depth):
-                    if c.ub <= best:
+                    thr = max(alpha, best)
+                    if c.ub <= thr:
+                        if c.ub_free > thr:
+                            self.cuts += 1  # only the depth limit pruned it
+                        bound = max(bound, c.ub)
                         continue
                     bit = 1 << c.q
-                    vy, _ = self.value(c.b_yes, asked | bit, yes | bit, depth - 1, c.m_yes, c.a_yes)
-                    vn, _ = self.value(c.b_no, asked | bit, yes, depth - 1, c.m_no, c.a_no)
-                    v = p.q_reward + p.gamma * (c.p_yes * vy + (1.0 - c.p_yes) * vn)
-                    if root is not None:
-                        root[c.q] = (v, c.ub)
-                    if v > best:
-                        best, act = v, p.questions[c.q]
-        self.v_memo[key] = (best, act)
-        return best, act
+                    py, pn = c.p_yes, 1.0 - c.p_yes
+                    a_y = (thr - p.q_reward - p.gamma * pn * c.u_no) / (p.gamma * py)
+                    vy, _, ey = self.value(c.b_yes, asked | bit, yes | bit, depth - 1, c.m_yes, c.a_yes, a_y)
+                    a_n = (thr - p.q_reward - p.gamma * py * vy) / (p.gamma * pn)
+                    vn, _, en = self.value(c.b_no, asked | bit, yes, depth - 1, c.m_no, c.a_no, a_n)
+                    v = p.q_reward + p.gamma * (py * vy + pn * vn)
+                    if ey and en:
+                        if root is not None:
+                            root[c.q] = v
+                        if v > best:
+                            best, act = v, p.questions[c.q]
+                    else:
+                        bound = max(bound, v)  # an upper bound <= thr
+        exact = best > alpha or bound <= best
+        result = (best, act, True) if exact else (max(best, bound), act, False)
+        if exact and self.cuts == cuts:
+            self.free_memo[(asked, yes)] = (best, act)
+        self.v_memo[key] = result
+        return result
 
 
 class Solver:
@@ -152,31 +237,31 @@ class Solver:
             return PlanResult(act, math.nan, math.nan, 0, 0, (time.perf_counter() - t0) * 1e3, True)
         deadline = t0 + snap.budget_s if snap.budget_s is not None else math.inf
         prob = Problem(self.model, snap)
-        s = _Search(prob, deadline, snap.node_budget)
+        s = _Search(prob, deadline, snap.node_budget, self.model.cfg.planner.bound_levels)
         b0 = prob.b0
         ((m0, a0),) = s.move_values([(0, 0)], [b0])
         best_v, best_a, depth_done, complete = m0, a0, 0, False
         ub = max(m0, prob.q_reward + prob.gamma * float(b0 @ prob.U)) if s.n_q else m0
-        root_values: dict[str, float] = {}
+        root_values: dict[Action, float] = {}
         try:
             for depth in range(0, s.max_depth + 1):
-                s.depth_cut = False
-                root: dict[int, tuple[float, float]] = {}
+                cuts = s.cuts
+                root: dict[int, float] = {}
                 try:
-                    v, a = s.value(b0, 0, 0, depth, m0, a0, root)
+                    v, a, _ = s.value(b0, 0, 0, depth, m0, a0, root=root)
                 finally:
-                    for q, (qv, _) in root.items():
+                    for q, qv in root.items():
                         if qv > best_v:
                             best_v, best_a = qv, prob.questions[q]
-                        root_values[prob.questions[q].label] = qv
+                        root_values[prob.questions[q]] = qv
                 best_v, best_a, depth_done = v, a, depth
-                if not s.depth_cut or depth == s.max_depth:
+                if s.cuts == cuts or depth == s.max_depth:
                     complete = True
                     ub = v
                     break
         except _Stop:
             pass
-        root_values.setdefault(a0.label, m0)
+        root_values.setdefault(a0, m0)
         return PlanResult(
             action=best_a,
             value=float(best_v),
@@ -188,3 +273,23 @@ class Solver:
             root_values=root_values,
         )
 
+
+    def action_values(self, snap: Snapshot) -> dict[Action, float]:
+        """Exact value of every root action (then optimal play).
+
+        For benchmarks and tests: a planner's choice is optimal iff its value equals the maximum.
+        """
+        prob = Problem(self.model, snap)
+        s = _Search(prob, math.inf, None, self.model.cfg.planner.bound_levels)
+        b0 = prob.b0
+        out: dict[Action, float] = {}
+        for j, a in enumerate(prob.moves):
+            out[a] = float(b0 @ prob.M[:, j])
+        depth = s.max_depth - 1
+        if depth >= 0:
+            for c in s.expand(b0, 0, 0, s.max_depth):
+                bit = 1 << c.q
+                vy, _, _ = s.value(c.b_yes, bit, bit, depth, c.m_yes, c.a_yes)
+                vn, _, _ = s.value(c.b_no, bit, 0, depth, c.m_no, c.a_no)
+                out[prob.questions[c.q]] = prob.q_reward + prob.gamma * (c.p_yes * vy + (1 - c.p_yes) * vn)
+        return out

@@ -20,7 +20,6 @@ from ..arm.kinematic import KinematicArm
 from ..config import Config
 from ..geometry import Pose
 from ..planner.actions import NO_ASSIST, Action, ActionKind
-from ..planner.belief import Belief
 from ..planner.goals import Goal
 from ..planner.model import SharedAutonomyModel
 from ..planner.scene import Scene

@@ -1,0 +1,418 @@
+"""Belief tracking (sections III-D, F, G) against hand computations.
+
+Expected numbers are computed here with plain ``math`` from the published constants, never by calling the
+function under test.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sa_daemon.config import Config, IntentConfig
+from sa_daemon.geometry import Pose
+from sa_daemon.planner.belief import Belief, cap_probabilities
+from sa_daemon.planner.goals import Goal, GraspType
+from sa_daemon.planner.goalset import GoalSet
+from sa_daemon.planner.huber import huber_slope, huber_value, q_minus_v
+
+TOP = (math.pi, 0.0, 0.0)
+GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
+INTENT = IntentConfig()
+T = 0.1  # ACTION_APPLY_TIME (s)
+
+
+# -- hand versions of the published Huber value (translation: c 2.25, delta 0.07, a 0.2) ------------------
+
+
+def v_trans(d: float) -> float:
+    c, delta, a = 2.25, 0.07, 0.2
+    return 0.5 * (c / delta) * d * d + a * d if d <= delta else (c + a) * d - c * delta / 2
+
+
+def slope_trans(d: float) -> float:
+    c, delta, a = 2.25, 0.07, 0.2
+    return (c / delta) * d + a if d <= delta else c + a
+
+
+ROT_SLOPE_AT_ZERO = 0.07 * 0.01  # weight * a of the rotation term
+
+
+def hand_q_minus_v(gripper: list[float], goal: list[float], u_lin: list[float]) -> float:
+    """Q - V for a pure-translation twist when gripper and goal orientations coincide."""
+    d0 = math.dist(gripper, goal)
+    moved = [x + v * T for x, v in zip(gripper, u_lin)]
+    d1 = math.dist(moved, goal)
+    cost = T * (slope_trans(d0) + ROT_SLOPE_AT_ZERO)
+    return cost + v_trans(d1) - v_trans(d0)
+
+
+def top_goal(obj: str, *positions) -> Goal:
+    return Goal(obj, GraspType.TOP, tuple(Pose.from_rpy(p, TOP) for p in positions))
+
+
+def offset(dx=0.0, dy=0.0, dz=0.0) -> list[float]:
+    return [0.30 + dx, 0.0 + dy, 0.20 + dz]
+
+
+# -- Huber value ----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("d", [0.0, 0.03, 0.07, 0.2])
+def test_translation_huber_value_and_slope_by_hand(d):
+    h = INTENT.translation
+    assert float(huber_value(d, h)) == pytest.approx(v_trans(d), abs=1e-12)
+    assert float(huber_slope(d, h)) == pytest.approx(slope_trans(d), abs=1e-12)
+
+
+def test_huber_value_by_hand_literal_numbers():
+    h = INTENT.translation
+    # below delta: 0.5 * (2.25 / 0.07) * 0.03^2 + 0.2 * 0.03
+    assert float(huber_value(0.03, h)) == pytest.approx(0.5 * 2.25 / 0.07 * 0.0009 + 0.006)
+    # above delta: 2.45 * 0.2 - 2.25 * 0.07 / 2
+    assert float(huber_value(0.2, h)) == pytest.approx(0.49 - 0.07875)
+    assert float(huber_slope(0.2, h)) == pytest.approx(2.45)
+
+
+def test_rotation_huber_is_weighted_by_0_07():
+    h = INTENT.rotation
+    c, delta, a, w = 0.20, math.pi / 32, 0.01, 0.07
+    d_in, d_out = 0.05, 1.0
+    assert float(huber_value(d_in, h)) == pytest.approx(w * (0.5 * c / delta * d_in**2 + a * d_in))
+    assert float(huber_value(d_out, h)) == pytest.approx(w * ((c + a) * d_out - c * delta / 2))
+    assert float(huber_slope(d_in, h)) == pytest.approx(w * (c / delta * d_in + a))
+    assert float(huber_slope(d_out, h)) == pytest.approx(w * (c + a))
+
+
+@pytest.mark.parametrize("which", ["translation", "rotation"])
+def test_huber_value_and_slope_continuous_at_delta(which):
+    h = getattr(INTENT, which)
+    eps = 1e-9
+    below, above = h.delta - eps, h.delta + eps
+    assert float(huber_value(above, h)) - float(huber_value(below, h)) == pytest.approx(0.0, abs=1e-7)
+    assert float(huber_slope(above, h)) == pytest.approx(float(huber_slope(below, h)), abs=1e-6)
+    assert float(huber_slope(h.delta, h)) == pytest.approx(h.weight * (h.c + h.a))
+
+
+# -- MaxEnt IOC likelihood ------------------------------------------------------------------------------
+
+
+def one_goal_arrays(position) -> tuple[np.ndarray, np.ndarray]:
+    pose = Pose.from_rpy(position, TOP)
+    return pose.position.reshape(1, 1, 3), pose.quat_wxyz.reshape(1, 1, 4)
+
+
+@pytest.mark.parametrize("dist", [0.05, 0.15])
+def test_q_minus_v_toward_beats_away_and_matches_hand(dist):
+    goal = offset(dx=dist)
+    gp, gq = one_goal_arrays(goal)
+    toward, away = [0.2, 0, 0], [-0.2, 0, 0]
+    nll_toward = float(q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, np.r_[toward, 0, 0, 0], gp, gq, INTENT)[0])
+    nll_away = float(q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, np.r_[away, 0, 0, 0], gp, gq, INTENT)[0])
+    assert nll_toward == pytest.approx(hand_q_minus_v(offset(), goal, toward), abs=1e-12)
+    assert nll_away == pytest.approx(hand_q_minus_v(offset(), goal, away), abs=1e-12)
+    assert nll_toward < nll_away  # moving toward the goal is more likely (exp(-nll) larger)
+
+
+def test_q_minus_v_uses_the_lowest_value_pose_of_a_goal():
+    near, far = offset(dx=0.04), offset(dx=-0.3)
+    g = top_goal("cup", far, near)
+    gs = GoalSet((g,))
+    u = [0.0, 0.1, 0.0]
+    got = float(q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, np.r_[u, 0, 0, 0], gs.positions, gs.quats_wxyz, INTENT)[0])
+    assert got == pytest.approx(hand_q_minus_v(offset(), near, u), abs=1e-12)
+
+
+def test_q_minus_v_of_a_padded_goal_set_equals_each_goal_alone():
+    multi = top_goal("cup", offset(dx=-0.2), offset(dy=0.06), offset(dz=0.3))
+    single = top_goal("bowl", offset(dx=0.08))
+    gs = GoalSet((multi, single))  # padded to 3 poses per goal
+    u = np.array([0.05, 0.1, 0.0, 0.0, 0.0, 0.0])
+    both = q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, INTENT)
+    for i, g in enumerate((multi, single)):
+        alone = GoalSet((g,))
+        got = q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, u, alone.positions, alone.quats_wxyz, INTENT)
+        assert both[i] == pytest.approx(float(got[0]), abs=1e-15)
+    assert both[0] == pytest.approx(hand_q_minus_v(offset(), offset(dy=0.06), [0.05, 0.1, 0.0]), abs=1e-12)
+
+
+def two_goal_belief(probs=(0.5, 0.5), second=None) -> tuple[Belief, list[list[float]]]:
+    """Goals at 0.10 m along x and (by default) 0.05 m along y from the gripper."""
+    positions = [offset(dx=0.10), second or offset(dy=0.05)]
+    gs = GoalSet((top_goal("cup", positions[0]), top_goal("bowl", positions[1])))
+    return Belief.from_probs(gs, np.array(probs)), positions
+
+
+def hand_update(prior: list[float], nll: list[float]) -> list[float]:
+    w = [p * math.exp(-n) for p, n in zip(prior, nll)]
+    s = sum(w)
+    return [x / s for x in w]
+
+
+@pytest.mark.parametrize("u_lin", [[0.2, 0.0, 0.0], [0.0, 0.2, 0.0], [-0.1, 0.05, 0.1]])
+def test_maxent_update_of_two_goals_matches_hand(u_lin):
+    prior = [0.3, 0.7]
+    b, positions = two_goal_belief(prior)
+    nll = [hand_q_minus_v(offset(), g, u_lin) for g in positions]
+    want = hand_update(prior, nll)
+    got = b.after_input(GRIPPER, np.r_[u_lin, 0, 0, 0], INTENT)
+    np.testing.assert_allclose(got.probs, want, atol=1e-12)
+
+
+def test_input_toward_a_goal_raises_its_probability():
+    b, _ = two_goal_belief(second=offset(dy=0.10))  # equidistant goals
+    toward_first = b.after_input(GRIPPER, np.array([0.2, 0, 0, 0, 0, 0]), INTENT)
+    toward_second = b.after_input(GRIPPER, np.array([0, 0.2, 0, 0, 0, 0]), INTENT)
+    assert toward_first.probs[0] > 0.5 > toward_second.probs[0]
+
+
+def test_zero_input_still_updates_by_the_step_cost():
+    b, positions = two_goal_belief()
+    got = b.after_input(GRIPPER, np.zeros(6), INTENT)
+    nll = [hand_q_minus_v(offset(), g, [0, 0, 0]) for g in positions]
+    want = hand_update([0.5, 0.5], nll)
+    assert not np.allclose(got.probs, [0.5, 0.5])
+    np.testing.assert_allclose(got.probs, want, atol=1e-12)
+    assert got.probs[1] > got.probs[0]  # the nearer goal (smaller slope) gains
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_user_twist_is_refused_and_belief_unchanged(bad):
+    b, _ = two_goal_belief((0.3, 0.7))
+    before = b.log_p.copy()
+    u = np.array([0.1, 0.0, bad, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        b.after_input(GRIPPER, u, INTENT)
+    np.testing.assert_array_equal(b.log_p, before)
+    np.testing.assert_allclose(b.probs, [0.3, 0.7])
+
+
+def test_wrong_shape_user_twist_is_refused():
+    b, _ = two_goal_belief()
+    with pytest.raises(ValueError):
+        b.after_input(GRIPPER, np.zeros(3), INTENT)
+
+
+# -- cap ------------------------------------------------------------------------------------------------
+
+
+def test_cap_spreads_excess_equally():
+    got = cap_probabilities(np.array([0.995, 0.003, 0.002]), 0.99)
+    excess = 0.995 - 0.99
+    np.testing.assert_allclose(got, [0.99, 0.003 + excess / 2, 0.002 + excess / 2], atol=1e-15)
+    np.testing.assert_allclose(cap_probabilities(np.array([0.5, 0.5]), 0.99), [0.5, 0.5])
+
+
+def test_repeated_input_never_exceeds_the_cap():
+    b, _ = two_goal_belief(second=offset(dy=0.10))
+    for _ in range(300):
+        b = b.after_input(GRIPPER, np.array([0.2, 0, 0, 0, 0, 0]), INTENT)
+    assert b.probs.max() == pytest.approx(0.99, abs=1e-12)
+    assert b.probs.sum() == pytest.approx(1.0)
+
+
+def test_answer_yes_capped_at_0_99_with_excess_spread():
+    gs = GoalSet((top_goal("a", offset()), top_goal("b", offset(0.1)), top_goal("c", offset(0.2))))
+    b = Belief.uniform(gs).after_answer("a:top", True, INTENT)
+    raw_a = 0.999 / (0.999 + 2 * 0.001)
+    raw_other = 0.001 / (0.999 + 2 * 0.001)
+    excess = raw_a - 0.99
+    np.testing.assert_allclose(b.probs, [0.99, raw_other + excess / 2, raw_other + excess / 2], atol=1e-12)
+
+
+# -- answers --------------------------------------------------------------------------------------------
+
+
+def four_targets() -> GoalSet:
+    return GoalSet(tuple(top_goal(n, offset(dx=0.05 * i)) for i, n in enumerate("abcd")))
+
+
+def test_answer_yes_by_hand():
+    prior = [0.01, 0.33, 0.33, 0.33]
+    b = Belief.from_probs(four_targets(), np.array(prior)).after_answer("a:top", True, INTENT)
+    w = [prior[0] * 0.999] + [p * 0.001 for p in prior[1:]]
+    np.testing.assert_allclose(b.probs, [x / sum(w) for x in w], atol=1e-12)
+
+
+def test_answer_no_by_hand():
+    b = Belief.uniform(four_targets()).after_answer("b:top", False, INTENT)
+    w = [0.25 * 0.999, 0.25 * 0.001, 0.25 * 0.999, 0.25 * 0.999]
+    np.testing.assert_allclose(b.probs, [x / sum(w) for x in w], atol=1e-12)
+
+
+def test_answer_about_a_target_with_several_copies_moves_all_copies():
+    a = top_goal("cup", offset(dx=0.05), offset(dx=0.08))
+    others = (top_goal("bowl", offset(dy=0.1)), top_goal("plate", offset(dy=-0.1)))
+    gs = GoalSet((a.with_poses(a.poses[:1]), a.with_poses(a.poses[1:])) + others)
+    prior = [0.2, 0.2, 0.3, 0.3]
+    yes = Belief.from_probs(gs, np.array(prior)).after_answer("cup:top", True, INTENT)
+    w = [0.2 * 0.999, 0.2 * 0.999, 0.3 * 0.001, 0.3 * 0.001]
+    np.testing.assert_allclose(yes.probs, [x / sum(w) for x in w], atol=1e-12)
+    assert yes.target_probabilities()["cup:top"] == pytest.approx(0.4 * 0.999 / (0.4 * 0.999 + 0.6 * 0.001))
+    no = Belief.from_probs(gs, np.array(prior)).after_answer("cup:top", False, INTENT)
+    w = [0.2 * 0.001, 0.2 * 0.001, 0.3 * 0.999, 0.3 * 0.999]
+    np.testing.assert_allclose(no.probs, [x / sum(w) for x in w], atol=1e-12)
+
+
+def test_answer_about_unknown_target_is_refused():
+    with pytest.raises(ValueError):
+        Belief.uniform(four_targets()).after_answer("spoon:top", True, INTENT)
+
+
+# -- resampling and redistribution ----------------------------------------------------------------------
+
+# Target "a" has four grasp poses at 0.05, 0.02, 0.08 and 0.11 m from the gripper (same orientation), so
+# the closeness order of its pose indices is 1, 0, 2, 3.
+A_POSES = [offset(dx=0.05), offset(dx=0.02), offset(dx=0.08), offset(dx=0.11)]
+
+
+def scene_with_multi_pose_target() -> GoalSet:
+    return GoalSet(
+        (
+            top_goal("a", *A_POSES),
+            top_goal("b", offset(dy=0.1)),
+            top_goal("c", offset(dy=-0.1)),
+            top_goal("d", offset(dz=0.1)),
+        )
+    )
+
+
+def n_eff(p) -> float:
+    return 1.0 / sum(x * x for x in p)
+
+
+def test_resampling_allocates_copies_and_redistributes_poses_by_distance():
+    probs = [0.8, 0.1, 0.05, 0.05]
+    assert n_eff(probs) < 4 / 2
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array(probs))
+    r = b.resampled(GRIPPER, INTENT)
+    # allocation: clip(round(p * 4), 1, K): a -> round(3.2) = 3, the others round(<= 0.4) = 0 -> 1
+    assert [g.target for g in r.goals.goals] == ["a:top"] * 3 + ["b:top", "c:top", "d:top"]
+    copies = r.goals.goals[:3]
+    owned = [[list(p.position) for p in g.poses] for g in copies]
+    np.testing.assert_allclose(owned[0], [A_POSES[1]])  # closest
+    np.testing.assert_allclose(owned[1], [A_POSES[0]])  # second closest
+    np.testing.assert_allclose(owned[2], [A_POSES[2], A_POSES[3]])  # the last copy owns the rest
+    np.testing.assert_allclose(r.probs, [0.8 / 3] * 3 + [0.1, 0.05, 0.05], atol=1e-12)
+
+
+def test_resampled_copies_have_distinct_desired_poses():
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
+    r = b.resampled(GRIPPER, INTENT)
+    kp, _ = r.goals.desired_poses(GRIPPER, INTENT.rotation_weight_m_per_rad)
+    copies = kp[:3]
+    assert len({tuple(np.round(p, 9)) for p in copies}) == 3
+
+
+def test_resampling_preserves_target_marginals_and_keeps_every_target():
+    probs = [0.9, 0.002, 0.05, 0.048]
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array(probs))
+    r = b.resampled(GRIPPER, INTENT)
+    assert r is not b
+    before, after = b.target_probabilities(), r.target_probabilities()
+    assert set(after) == set(before) == {"a:top", "b:top", "c:top", "d:top"}
+    for t in before:
+        assert after[t] == pytest.approx(before[t], abs=1e-15)
+
+
+def test_allocation_is_clipped_by_the_number_of_grasp_poses():
+    two_pose = top_goal("a", offset(dx=0.03), offset(dx=0.06))
+    gs = GoalSet((two_pose, top_goal("b", offset(dy=0.1)), top_goal("c", offset(dy=-0.1)), top_goal("d", offset(dz=0.1))))
+    b = Belief.from_probs(gs, np.array([0.9, 0.04, 0.03, 0.03]))  # round(3.6) = 4 > K = 2
+    r = b.resampled(GRIPPER, INTENT)
+    assert [g.target for g in r.goals.goals].count("a:top") == 2
+    assert [len(g.poses) for g in r.goals.goals[:2]] == [1, 1]
+
+
+def test_resampling_trigger_requires_n_eff_below_half_the_goals():
+    gs = scene_with_multi_pose_target()
+    # Both beliefs would change the allocation of "a" (round(1.8) = 2 and round(2.8) = 3).
+    above = [0.45, 0.35, 0.1, 0.1]
+    below = [0.7, 0.1, 0.1, 0.1]
+    assert n_eff(above) >= 2 > n_eff(below)
+    b_above = Belief.from_probs(gs, np.array(above))
+    assert b_above.resampled(GRIPPER, INTENT) is b_above
+    b_below = Belief.from_probs(gs, np.array(below))
+    assert len(b_below.resampled(GRIPPER, INTENT).goals) == 6
+
+
+def test_trigger_near_the_boundary():
+    gs = scene_with_multi_pose_target()
+    # p = [x, y, y, y]: sum p^2 just below / just above 0.5 (N_eff just above / below 2); a gets 3 copies.
+    def probs_with_sum_sq(s):
+        # solve x^2 + 3 y^2 = s, x + 3 y = 1 for the larger x
+        y = (6 - math.sqrt(36 - 48 * (1 - s))) / 24
+        return [1 - 3 * y, y, y, y]
+
+    just_above = probs_with_sum_sq(0.499)
+    just_below = probs_with_sum_sq(0.501)
+    assert n_eff(just_above) > 2 > n_eff(just_below)
+    assert round(just_above[0] * 4) == round(just_below[0] * 4) == 3
+    b = Belief.from_probs(gs, np.array(just_above))
+    assert b.resampled(GRIPPER, INTENT) is b
+    assert len(Belief.from_probs(gs, np.array(just_below)).resampled(GRIPPER, INTENT).goals) == 6
+
+
+def test_no_resampling_when_the_allocation_would_not_change():
+    # Single-pose targets: K_T = 1 caps every allocation at 1, so however skewed, nothing changes.
+    b = Belief.from_probs(four_targets(), np.array([0.97, 0.01, 0.01, 0.01]))
+    assert b.n_eff < 2
+    assert b.resampled(GRIPPER, INTENT) is b
+    # An already resampled belief with the same target probabilities is left alone too.
+    r = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05])).resampled(GRIPPER, INTENT)
+    assert r.resampled(GRIPPER, INTENT) is r
+
+
+def test_resampling_disabled_by_config():
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
+    cfg = IntentConfig(resample=False)
+    assert b.resampled(GRIPPER, cfg) is b
+
+
+def test_second_resampling_pools_the_copies_poses():
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
+    r = b.resampled(GRIPPER, INTENT)  # a: 3 copies
+    # input has since favoured one copy: N_eff = 1 / 0.5336 < 6 / 2, and a now gets round(3.8) = 4 copies
+    probs = np.array([0.7, 0.2, 0.05, 0.03, 0.01, 0.01])
+    assert n_eff(probs) < 3
+    r2 = Belief.from_probs(r.goals, probs).resampled(GRIPPER, INTENT)
+    a_copies = [g for g in r2.goals.goals if g.target == "a:top"]
+    assert [len(g.poses) for g in a_copies] == [1, 1, 1, 1]
+    got = sorted(tuple(np.round(g.poses[0].position, 9)) for g in a_copies)
+    assert got == sorted(tuple(np.round(p, 9)) for p in A_POSES)
+
+
+def test_paper_fig2_example():
+    # Four targets with five grasp poses each; target 2 dominates.
+    gs = GoalSet(
+        tuple(
+            top_goal(f"obj{i}", *[offset(dx=0.03 * (i + 1), dy=0.02 * k) for k in range(5)])
+            for i in range(1, 5)
+        )
+    )
+    probs = [0.03, 0.70, 0.02, 0.25]
+    assert n_eff(probs) < 2
+    r = Belief.from_probs(gs, np.array(probs)).resampled(GRIPPER, INTENT)
+    targets = [g.target for g in r.goals.goals]
+    assert targets.count("obj2:top") == 3
+    assert targets.count("obj4:top") == 1  # round(1.0)
+    assert set(targets) == {"obj1:top", "obj2:top", "obj3:top", "obj4:top"}  # nothing thrown away
+    copies = [g for g in r.goals.goals if g.target == "obj2:top"]
+    assert [len(g.poses) for g in copies] == [1, 1, 3]
+    for g, p in zip(r.goals.goals, r.probs):
+        if g.target == "obj2:top":
+            assert p == pytest.approx(0.70 / 3, abs=1e-12)
+    # the copies' poses are the 1st, 2nd and the rest of the closest to the gripper (dy = 0, 0.02, ...)
+    dists = [min(math.dist(offset(), list(q.position)) for q in g.poses) for g in copies]
+    assert dists == sorted(dists)
+
+
+def test_model_update_input_resamples_when_due():
+    from sa_daemon.planner.model import SharedAutonomyModel
+
+    model = SharedAutonomyModel(Config())
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
+    nb = model.update_input(b, GRIPPER, np.zeros(6))
+    assert len(nb.goals) == 6
