@@ -74,10 +74,8 @@ def reference_action_value(prob: Problem, action) -> float:
     if action.kind is ActionKind.QUESTION:
         assert depth > 0
         return question_value(prob, b, prob.questions.index(action), frozenset(), depth)
-    if action in prob.moves:
-        return float(b @ prob.M[:, prob.moves.index(action)])
-    assert action.kind is ActionKind.HO
-    return ho_column(prob, b)[0]
+    assert action in prob.moves
+    return float(b @ prob.M[:, prob.moves.index(action)])
 
 
 def reference_optimum(prob: Problem) -> float:
