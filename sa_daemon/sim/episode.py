@@ -122,7 +122,7 @@ def run_trial(
     for step in range(n_steps):
         t = step * dt
         pose = arm.read().pose
-        inp = user.act(pose)
+        inp = user.act(pose, listening=question is not None)
         if inp.close:
             arm.command_gripper(True)
             closed = True

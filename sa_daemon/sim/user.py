@@ -115,10 +115,13 @@ class SimulatedUser:
         want = Mode.ROTATION if self.phase is Phase.ALIGN else Mode.TRANSLATION
         self._switch(want)
 
-    def act(self, pose: Pose) -> UserInput:
-        """The joystick sample for this instant; ``pose`` is the true current pose."""
+    def act(self, pose: Pose, listening: bool = False) -> UserInput:
+        """The joystick sample for this instant; ``pose`` is the true current pose. While
+        ``listening`` to a question the user keeps still."""
         self._seen.append(pose)
         seen = self._seen[0]  # the oldest kept pose: ``reaction_delay_s`` ago
+        if listening:
+            return UserInput(np.zeros(3), self.mode)
         if self.at_goal(pose):
             return UserInput(np.zeros(3), self.mode, close=True)
         if self._switch_left > 0.0:

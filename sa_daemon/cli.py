@@ -1,0 +1,109 @@
+"""The ``sa-daemon`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from .config import METHODS, ConfigError, load_config
+from .planner.goals import parse_target
+from .planner.scene import SceneError, builtin_scene_names, load_scene
+
+
+def _scene_arg(args: argparse.Namespace) -> str:
+    return args.scene_file or args.scene
+
+
+def _add_scene(p: argparse.ArgumentParser, required: bool = True) -> None:
+    g = p.add_mutually_exclusive_group(required=required)
+    g.add_argument("--scene", help=f"built-in scene ({', '.join(builtin_scene_names())})")
+    g.add_argument("--scene-file", help="scene TOML file (docs/scenes.md)")
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from .sim.evaluate import TrialSpec, format_summary, run_trials, summarise, write_results
+
+    cfg = load_config(args.config)
+    scene = load_scene(_scene_arg(args))
+    tasks = args.task or scene.targets
+    for t in tasks:
+        parse_target(t)
+        scene.goal(t)
+    methods = args.method or list(METHODS)
+    specs = [TrialSpec(_scene_arg(args), t, m, s) for t in tasks for m in methods for s in range(args.seeds)]
+    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet)
+    summary = summarise(trials)
+    print(format_summary(summary))
+    if args.json:
+        meta = {"scene": scene.name, "tasks": tasks, "methods": methods, "seeds": args.seeds,
+                "arm": args.arm, "config": cfg.model_dump(mode="json")}
+        write_results(args.json, trials, summary, meta)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_bench_planner(args: argparse.Namespace) -> int:
+    from .bench.planner import format_table, run_planner_bench, write_json
+
+    cfg = load_config(args.config)
+    r = run_planner_bench(load_scene(_scene_arg(args)), cfg, args.samples, args.budget, peer=not args.no_peer)
+    print(format_table(r))
+    if args.json:
+        write_json(r, args.json)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_scenes(args: argparse.Namespace) -> int:
+    for name in builtin_scene_names():
+        s = load_scene(name)
+        print(f"{name}: {len(s.objects)} objects, {len(s.goals)} goals")
+        for g in s.goals:
+            print(f"  {g.target:<34} {len(g.poses):>2} grasp poses")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sa-daemon", description="Shared-autonomy daemon for the xArm-6.")
+    p.add_argument("--config", help="config.toml (default: built-in defaults)")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    e = sub.add_parser("eval", help="run tasks x methods x seeds with the simulated user")
+    _add_scene(e)
+    e.add_argument("--task", action="append", help="object:grasp_type (repeatable; default: every target)")
+    e.add_argument("--method", action="append", choices=METHODS, help="repeatable; default: all eight")
+    e.add_argument("--seeds", type=int, default=5)
+    e.add_argument("--json", help="write trials and summary to this file")
+    e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    e.add_argument("--arm", choices=["kinematic"], default="kinematic")
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.set_defaults(func=cmd_eval)
+
+    b = sub.add_parser("bench", help="benchmarks that print figures")
+    bsub = b.add_subparsers(dest="bench", required=True)
+    bp = bsub.add_parser("planner", help="solver speed, anytime agreement, pomdp_py peer, belief update")
+    _add_scene(bp)
+    bp.add_argument("--json", help="write the figures to this file")
+    bp.add_argument("--samples", type=int, default=200)
+    bp.add_argument("--budget", type=float, default=0.1, help="anytime budget (s)")
+    bp.add_argument("--no-peer", action="store_true", help="skip the pomdp_py comparison")
+    bp.set_defaults(func=cmd_bench_planner)
+
+    s = sub.add_parser("scenes", help="list the built-in scenes and their goals")
+    s.set_defaults(func=cmd_scenes)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (ConfigError, SceneError, KeyError, ValueError) as e:
+        msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+        print(f"sa-daemon: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
