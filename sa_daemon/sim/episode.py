@@ -19,12 +19,13 @@ from ..arm.base import Arm
 from ..arm.kinematic import KinematicArm
 from ..config import Config
 from ..geometry import Pose
-from ..planner.actions import NO_ASSIST, Action, ActionKind
+from ..planner.actions import NO_ASSIST, Action, ActionKind, Mode
 from ..planner.goals import Goal
 from ..planner.model import SharedAutonomyModel
 from ..planner.scene import Scene
 from ..planner.snapshot import PlanResult, Snapshot
 from ..planner.solver import Solver
+from . import metrics
 from .user import SimulatedUser
 
 ArmFactory = Callable[[Scene, Config], Arm]
@@ -112,8 +113,9 @@ def run_trial(
     question: str | None = None
     answer_at = 0.0
     n_steps = int(np.ceil(cfg.sim_user.timeout_s / dt))
-    joystick = 0.0
-    opposed_steps = 0
+    axes: list = []
+    modes: list[str] = []
+    opposed: list[bool] = []
     plans = 0
     closed = False
     timeline = Timeline() if record else None
@@ -127,7 +129,6 @@ def run_trial(
             arm.command_gripper(True)
             closed = True
             break
-        joystick += float(np.sum(np.abs(inp.axes)))
         u = inp.twist(cfg.input)
         belief = model.update_input(belief, pose, u)
         if question is not None:
@@ -151,7 +152,9 @@ def run_trial(
         if plan_goals is not belief.goals:
             action, plan_goals = model.remap_action(action, plan_goals, belief.goals, pose), belief.goals
         cmd = model.command(action, belief.goals, belief.probs, pose, u, method)
-        opposed_steps += cmd.opposed
+        axes.append(inp.axes)
+        modes.append(inp.mode.value)
+        opposed.append(cmd.opposed)
         arm.command_twist(cmd.total_twist)
         arm.step(dt)
         if timeline is not None:
@@ -163,7 +166,7 @@ def run_trial(
             timeline.user_twist.append(u.tolist())
             timeline.robot_twist.append(cmd.robot_twist.tolist())
             timeline.mode.append(inp.mode.value)
-    elapsed = (step + 1) * dt if not closed else step * dt
+    elapsed = len(axes) * dt
     final_p = belief.target_probabilities()[task]
     success = closed and user.at_goal(arm.read().pose)
     return TrialResult(
@@ -173,10 +176,10 @@ def run_trial(
         seed=seed,
         success=bool(success),
         completion_time_s=round(elapsed, 6),
-        mode_changes=user.mode_changes,
-        joystick_input=joystick,
-        opposing_pct=100.0 * opposed_steps / max(1, step + (0 if closed else 1)),
-        correct_prediction=bool(final_p > 0.7),
+        mode_changes=metrics.mode_changes([Mode.TRANSLATION.value] + modes),
+        joystick_input=metrics.joystick_input(axes),
+        opposing_pct=metrics.opposing_pct(opposed),
+        correct_prediction=metrics.correct_prediction(final_p),
         questions=len(asked),
         final_target_p=final_p,
         plans=plans,
