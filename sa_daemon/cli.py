@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from .config import METHODS, ConfigError, load_config
 from .planner.goals import parse_target
@@ -32,9 +33,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
         scene.goal(t)
     methods = args.method or list(METHODS)
     specs = [TrialSpec(_scene_arg(args), t, m, s) for t in tasks for m in methods for s in range(args.seeds)]
-    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet)
+    plots = Path(args.plots) if args.plots else None
+    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots)
     summary = summarise(trials)
     print(format_summary(summary))
+    if plots is not None:
+        from .sim.plots import plot_summary_bars
+
+        bars = plot_summary_bars(summary, plots / f"summary_{scene.name.replace(' ', '-')}.png", title=scene.name)
+        print(f"wrote {len(trials)} timelines and {bars} to {plots}")
     if args.json:
         meta = {"scene": scene.name, "tasks": tasks, "methods": methods, "seeds": args.seeds,
                 "arm": args.arm, "config": cfg.model_dump(mode="json")}
@@ -75,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method", action="append", choices=METHODS, help="repeatable; default: all eight")
     e.add_argument("--seeds", type=int, default=5)
     e.add_argument("--json", help="write trials and summary to this file")
+    e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
     e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     e.add_argument("--arm", choices=["kinematic"], default="kinematic")
     e.add_argument("--quiet", action="store_true", help="no progress bar")

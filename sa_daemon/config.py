@@ -54,12 +54,16 @@ class HOConfig(_Section):
 
 
 class MoveConfig(_Section):
-    """Move-to-goal velocity generator: proportional toward ``k_c``, saturated."""
+    """Move-to-goal velocity generator: proportional toward ``k_c``, saturated.
+
+    The saturations sit below the user's full deflection (``input``) so that, blended at ``alpha = 0.5``,
+    the user can always overpower a wrong assistance: it may slow the user, never block them.
+    """
 
     linear_gain: float = Field(1.0, gt=0, description="1/s")
-    linear_max_mps: float = Field(0.2, gt=0)
+    linear_max_mps: float = Field(0.15, gt=0)
     angular_gain: float = Field(1.0, gt=0, description="1/s")
-    angular_max_radps: float = Field(0.4, gt=0)
+    angular_max_radps: float = Field(0.3, gt=0)
 
 
 class BlendConfig(_Section):
@@ -86,6 +90,9 @@ class RewardConfig(_Section):
     step_s: float = Field(0.1, gt=0, description="duration of one planning step (s)")
     lookahead_steps: int = Field(
         15, ge=1, le=100, description="H: a move is judged at its pose after H steps (1 = literal reading)"
+    )
+    discount_lookahead: bool = Field(
+        False, description="a move's reward arrives when its pose is reached: discounted by gamma^H"
     )
 
 
@@ -125,6 +132,8 @@ class SimUserConfig(_Section):
     mode_switch_s: float = Field(0.5, ge=0, description="time without input to switch mode (s)")
     answer_delay_s: float = Field(1.5, ge=0, description="time to answer a question (s)")
     answer_error_rate: float = Field(0.0, ge=0, le=1, description="probability of a wrong answer")
+    persist_window_s: float = Field(1.0, gt=0, description="a user who saw no progress over this long ...")
+    persist_progress: float = Field(0.1, ge=0, lt=1, description="... (error shrank by less than this fraction)")
     pregrasp_standoff_m: float = Field(0.06, ge=0, description="first translate to this far back along the approach")
     pregrasp_tolerance_m: float = Field(0.02, gt=0, description="then rotate once within this of the pre-grasp point")
     rotation_done_rad: float = Field(math.pi / 96, gt=0, description="rotation is finished within this")

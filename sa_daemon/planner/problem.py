@@ -94,6 +94,8 @@ class Problem:
                 opposed = opposes(u, r, cfg.reward.opposition_threshold)
             pos, quat = integrate_pose(pos, quat, total, self.dt)
         rewards = self._rewards_at(pos, quat) + opposition_reward(opposed, cfg.reward)[:, None]
+        if cfg.reward.discount_lookahead:
+            rewards = rewards * self.gamma**self.H  # received when the pose is reached
         return rewards.T
 
     def best_moves(self, beliefs: FloatArray) -> tuple[FloatArray, list[Action]]:

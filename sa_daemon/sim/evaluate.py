@@ -32,14 +32,31 @@ class TrialSpec:
     seed: int
 
 
-def _run(args: tuple[TrialSpec, Config]) -> dict:
-    spec, cfg = args
-    return run_trial(load_scene(spec.scene), spec.task, spec.method, spec.seed, cfg).metrics()
+def timeline_path(plots: Path, spec: TrialSpec, scene_name: str) -> Path:
+    """Where the Fig. 4 timeline of one trial goes."""
+    safe = f"{scene_name}_{spec.task}_{spec.method}_seed{spec.seed}".replace(" ", "-").replace(":", "-")
+    return plots / f"{safe.replace('+', '_')}.png"
 
 
-def run_trials(specs: list[TrialSpec], cfg: Config, jobs: int = 1, progress: bool = True) -> list[dict]:
-    """Run ``specs`` (in ``jobs`` spawned processes when > 1); results in the order of ``specs``."""
-    work = [(s, cfg) for s in specs]
+def _run(args: tuple[TrialSpec, Config, Path | None]) -> dict:
+    spec, cfg, plots = args
+    scene = load_scene(spec.scene)
+    result = run_trial(scene, spec.task, spec.method, spec.seed, cfg, record=plots is not None)
+    if plots is not None:
+        from .plots import plot_timeline
+
+        plot_timeline(result, timeline_path(plots, spec, scene.name))
+    return result.metrics()
+
+
+def run_trials(
+    specs: list[TrialSpec], cfg: Config, jobs: int = 1, progress: bool = True, plots: Path | None = None
+) -> list[dict]:
+    """Run ``specs`` (in ``jobs`` spawned processes when > 1); results in the order of ``specs``.
+
+    With ``plots`` every trial also writes its Fig. 4 timeline there.
+    """
+    work = [(s, cfg, plots) for s in specs]
     bar = tqdm(total=len(work), desc="trials", unit="trial", file=sys.stderr, disable=not progress)
     out: list[dict] = []
     if jobs <= 1:

@@ -74,6 +74,7 @@ class SimulatedUser:
         self.mode_changes = 0
         self._switch_left = 0.0
         self._seen: deque[Pose] = deque(maxlen=max(1, int(round(cfg.reaction_delay_s / dt))) + 1)
+        self._errors_seen: deque[float] = deque(maxlen=max(2, int(round(cfg.persist_window_s / dt))))
         approach = desired.rotation[:, 2]
         self.pregrasp = desired.position - cfg.pregrasp_standoff_m * approach
 
@@ -97,6 +98,17 @@ class SimulatedUser:
             self.mode = mode
             self.mode_changes += 1
             self._switch_left = self.cfg.mode_switch_s
+            self._errors_seen.clear()
+
+    def _push(self, err: FloatArray, gain: float, full: float) -> FloatArray:
+        """Axes for error ``err``: saturated proportional, or full deflection when stalled."""
+        n = float(np.linalg.norm(err))
+        hist = self._errors_seen
+        stalled = len(hist) == hist.maxlen and n > (1.0 - self.cfg.persist_progress) * hist[0]
+        hist.append(n)
+        if stalled and n > 1e-9:
+            return err / n
+        return _saturate(gain * err, full) / full
 
     def _update_phase(self, pose: Pose) -> None:
         c = self.cfg
@@ -134,10 +146,10 @@ class SimulatedUser:
         c = self.cfg
         if self.mode is Mode.TRANSLATION:
             err, _, _ = self._errors(seen)
-            axes = _saturate(c.linear_gain * err, self.scale.linear_scale_mps) / self.scale.linear_scale_mps
+            axes = self._push(err, c.linear_gain, self.scale.linear_scale_mps)
         else:
             err = rotation_error(self.desired.quat_wxyz, seen.quat_wxyz)
-            axes = _saturate(c.angular_gain * err, self.scale.angular_scale_radps) / self.scale.angular_scale_radps
+            axes = self._push(err, c.angular_gain, self.scale.angular_scale_radps)
         if c.noise_std > 0.0:
             axes = axes + self.rng.normal(0.0, c.noise_std, 3)
         return UserInput(np.clip(axes, -1.0, 1.0), self.mode)
