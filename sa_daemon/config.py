@@ -125,15 +125,20 @@ class LimitsConfig(_Section):
 class SimUserConfig(_Section):
     """The simulated user of ``docs/simulated-user.md``."""
 
+    max_deflection: float = Field(
+        0.09, gt=0, le=1, description="usual stick deflection (calibrated to the paper's manual input rate)"
+    )
     linear_gain: float = Field(5.0, gt=0, description="desired twist = gain * error (1/s)")
     angular_gain: float = Field(5.0, gt=0, description="1/s")
     reaction_delay_s: float = Field(0.15, ge=0, le=1.0, description="the user acts on the pose seen this long ago")
-    noise_std: float = Field(0.05, ge=0, le=0.5, description="Gaussian noise on each axis (joystick units)")
+    noise_std: float = Field(0.06, ge=0, le=0.5, description="Gaussian noise on each axis (joystick units)")
     mode_switch_s: float = Field(0.5, ge=0, description="time without input to switch mode (s)")
     answer_delay_s: float = Field(1.5, ge=0, description="time to answer a question (s)")
     answer_error_rate: float = Field(0.0, ge=0, le=1, description="probability of a wrong answer")
     persist_window_s: float = Field(1.0, gt=0, description="a user who saw no progress over this long ...")
-    persist_progress: float = Field(0.1, ge=0, lt=1, description="... (error shrank by less than this fraction)")
+    persist_progress: float = Field(
+        0.5, ge=0, lt=1, description="... (error shrank by less than this fraction of its own commanded motion)"
+    )
     pregrasp_standoff_m: float = Field(0.06, ge=0, description="first translate to this far back along the approach")
     pregrasp_tolerance_m: float = Field(0.02, gt=0, description="then rotate once within this of the pre-grasp point")
     rotation_done_rad: float = Field(math.pi / 96, gt=0, description="rotation is finished within this")

@@ -48,7 +48,7 @@ def test_move_twist_points_at_the_goal_proportionally():
 
 def test_move_twist_saturates_linear_speed_keeping_direction():
     t = move_twist(P0, Q0, P0 + [0.3, 0.4, 0.0], Q0, MOVE)  # 0.5 m away
-    np.testing.assert_allclose(t[:3], [0.2 * 0.6, 0.2 * 0.8, 0.0], atol=1e-12)
+    np.testing.assert_allclose(t[:3], [MOVE.linear_max_mps * 0.6, MOVE.linear_max_mps * 0.8, 0.0], atol=1e-12)
     np.testing.assert_allclose(t[3:], 0.0, atol=1e-12)
 
 
@@ -61,7 +61,8 @@ def test_move_twist_rotates_about_the_relative_axis():
 def test_move_twist_saturates_angular_speed():
     goal_q = rotated(Q0, [0.6, 0.0, -0.8])  # 1 rad about a tilted axis
     t = move_twist(P0, Q0, P0, goal_q, MOVE)
-    np.testing.assert_allclose(t[3:], [0.4 * 0.6, 0.0, -0.4 * 0.8], atol=1e-12)
+    w = MOVE.angular_max_radps
+    np.testing.assert_allclose(t[3:], [w * 0.6, 0.0, -w * 0.8], atol=1e-12)
 
 
 def test_move_twist_is_zero_at_the_goal():
@@ -191,8 +192,9 @@ def test_move_command_is_the_blend_of_user_and_move_twist(two_goal_scene):
     goals, pose = two_goal_scene
     u = np.array([0.0, 0.1, 0.0, 0.0, 0.0, 0.0])
     cmd = SharedAutonomyModel(Config()).command(Action(ActionKind.MOVE, 0, "cup:top"), goals, np.array([0.5, 0.5]), pose, u)
-    np.testing.assert_allclose(cmd.robot_twist, [0.2, 0, 0, 0, 0, 0], atol=1e-12)  # 0.2 m away, saturated
-    np.testing.assert_allclose(cmd.total_twist, [0.1, 0.05, 0, 0, 0, 0], atol=1e-12)
+    v = MOVE.linear_max_mps  # 0.2 m away: saturated
+    np.testing.assert_allclose(cmd.robot_twist, [v, 0, 0, 0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(cmd.total_twist, [0.5 * v, 0.05, 0, 0, 0, 0], atol=1e-12)
 
 
 def test_ho_command_uses_the_belief_weighted_gradient(two_goal_scene):

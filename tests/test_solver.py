@@ -29,7 +29,12 @@ TOP = (math.pi, 0.0, 0.0)
 
 def config(H: int = 15, top_goals: int = 3, max_questions: int = 10) -> Config:
     return config_from_dict(
-        {"reward": {"lookahead_steps": H}, "planner": {"top_goals": top_goals, "max_questions": max_questions}}
+        {
+            "reward": {"lookahead_steps": H},
+            "planner": {"top_goals": top_goals, "max_questions": max_questions},
+            # The geometry of these tests was laid out for move limits equal to the joystick's.
+            "move": {"linear_max_mps": 0.2, "angular_max_radps": 0.4},
+        }
     )
 
 

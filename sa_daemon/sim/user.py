@@ -73,8 +73,9 @@ class SimulatedUser:
         self.phase = Phase.APPROACH
         self.mode_changes = 0
         self._switch_left = 0.0
-        self._seen: deque[Pose] = deque(maxlen=max(1, int(round(cfg.reaction_delay_s / dt))) + 1)
-        self._errors_seen: deque[float] = deque(maxlen=max(2, int(round(cfg.persist_window_s / dt))))
+        self._seen: deque[Pose] = deque(maxlen=int(round(cfg.reaction_delay_s / dt)) + 1)
+        # (error, commanded motion this step) over the persistence window.
+        self._errors_seen: deque[tuple[float, float]] = deque(maxlen=max(2, int(round(cfg.persist_window_s / dt))))
         approach = desired.rotation[:, 2]
         self.pregrasp = desired.position - cfg.pregrasp_standoff_m * approach
 
@@ -104,11 +105,11 @@ class SimulatedUser:
         """Axes for error ``err``: saturated proportional, or full deflection when stalled."""
         n = float(np.linalg.norm(err))
         hist = self._errors_seen
-        stalled = len(hist) == hist.maxlen and n > (1.0 - self.cfg.persist_progress) * hist[0]
-        hist.append(n)
-        if stalled and n > 1e-9:
-            return err / n
-        return _saturate(gain * err, full) / full
+        commanded = sum(c for _, c in hist)
+        stalled = len(hist) == hist.maxlen and hist[0][0] - n < self.cfg.persist_progress * commanded
+        axes = err / n if stalled and n > 1e-9 else _saturate(gain * err, full * self.cfg.max_deflection) / full
+        hist.append((n, float(np.linalg.norm(axes)) * full * self.dt))
+        return axes
 
     def _update_phase(self, pose: Pose) -> None:
         c = self.cfg
