@@ -50,10 +50,16 @@ def cap_probabilities(p: FloatArray, cap: float) -> FloatArray:
 
 @dataclass(frozen=True, eq=False)
 class Belief:
-    """Goals and their normalised log-probabilities."""
+    """Goals and their normalised log-probabilities.
+
+    ``confirmed`` is the high-level target the user said "yes" to, if any: "once the user answers yes,
+    the high-level target is known" (section III-B), so from then on joystick input only moves
+    probability among that target's goals (its grasp-pose copies) and the target's total is kept.
+    """
 
     goals: GoalSet
     log_p: FloatArray
+    confirmed: str | None = None
 
     def __post_init__(self) -> None:
         lp = np.array(self.log_p, dtype=float)
@@ -93,7 +99,7 @@ class Belief:
         """Probability of each high-level target: what users and metrics see."""
         return self.goals.target_probabilities(self.probs)
 
-    def _normalised(self, log_p: FloatArray, cap: float) -> "Belief":
+    def _normalised(self, log_p: FloatArray, cap: float, confirmed: str | None = None) -> "Belief":
         # Stable log-sum-exp by max shift (scipy.special.logsumexp gives the same, at ~10x the call
         # overhead on 20-element arrays; this runs at 40 Hz).
         top = np.max(log_p)
@@ -102,7 +108,7 @@ class Belief:
         if p.max() > cap:
             with np.errstate(divide="ignore"):
                 log_p = np.log(cap_probabilities(p, cap))
-        return Belief(self.goals, log_p)
+        return Belief(self.goals, log_p, confirmed if confirmed is not None else self.confirmed)
 
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> "Belief":
         """MaxEnt IOC update from one joystick sample: ``log b(g) -= Q_g(x, u) - V_g(x)``.
@@ -112,7 +118,16 @@ class Belief:
         """
         u = _check_finite("user_twist", user_twist, (6,))
         nll = q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
-        return self._normalised(self.log_p - nll, cfg.cap)
+        if self.confirmed is None:
+            return self._normalised(self.log_p - nll, cfg.cap)
+        # Only the confirmed target's copies compete; its total probability stays as it is.
+        own = np.array([g.target == self.confirmed for g in self.goals.goals])
+        lp = np.array(self.log_p)
+        inner = lp[own] - nll[own]
+        inner = inner - np.max(inner)
+        total = np.sum(np.exp(lp[own]))
+        lp[own] = np.log(total) + inner - np.log(np.sum(np.exp(inner)))
+        return Belief(self.goals, lp, self.confirmed)
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -125,7 +140,7 @@ class Belief:
         if target not in self.goals.targets:
             raise ValueError(f"unknown target {target!r}")
         like = self.answer_likelihood(target, yes, cfg.answer_p_correct)
-        return self._normalised(self.log_p + np.log(like), cfg.cap)
+        return self._normalised(self.log_p + np.log(like), cfg.cap, target if yes else None)
 
     # -- resampling and redistribution (section III-G) -------------------------------------------------
 
@@ -172,4 +187,5 @@ class Belief:
                 own = order[i:] if i == n - 1 else [order[i]]
                 goals.append(template.with_poses(tuple(own)))
                 probs.append(tp[t] / n)
-        return Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
+        out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
+        return Belief(out.goals, out.log_p, self.confirmed)
