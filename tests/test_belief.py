@@ -416,3 +416,55 @@ def test_model_update_input_resamples_when_due():
     b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
     nb = model.update_input(b, GRIPPER, np.zeros(6))
     assert len(nb.goals) == 6
+
+
+# -- a "yes" answer fixes the high-level target (section III-B) ----------------------------------------
+
+
+def _toward(pose, goal, speed=0.2):
+    d = goal.positions[0] - pose.position
+    return np.concatenate((speed * d / np.linalg.norm(d), np.zeros(3)))
+
+
+def test_yes_confirms_the_target_against_later_joystick_evidence(scene, start_pose, cfg):
+    b = Belief.uniform(scene).after_answer("cup:side", True, cfg.intent)
+    assert b.confirmed == "cup:side"
+    before = b.target_probabilities()["cup:side"]
+    u = _toward(start_pose, scene.goals[3])  # straight at the bowl
+    for _ in range(200):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.target_probabilities()["cup:side"] == pytest.approx(before, abs=1e-12)
+
+
+def test_without_confirmation_the_same_evidence_moves_the_target(scene, start_pose, cfg):
+    b = Belief.uniform(scene).after_answer("cup:side", False, cfg.intent)  # "no" is soft evidence
+    assert b.confirmed is None
+    u = _toward(start_pose, scene.goals[3])
+    before = b.target_probabilities()["bowl:top"]
+    for _ in range(50):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.target_probabilities()["bowl:top"] > before + 0.1
+
+
+def test_confirmed_target_copies_still_compete(make_goal, start_pose, cfg):
+    left = make_goal("cup", "top", [0.45, 0.20, 0.09])
+    right = make_goal("cup", "top", [0.45, -0.20, 0.09])
+    other = make_goal("bowl", "top", [0.30, 0.0, 0.06])
+    b = Belief.uniform(GoalSet((left, right, other))).after_answer("cup:top", True, cfg.intent)
+    total = b.target_probabilities()["cup:top"]
+    u = _toward(start_pose, left)
+    for _ in range(40):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.probs[0] > b.probs[1] + 0.2  # the copy the user heads for wins
+    assert b.target_probabilities()["cup:top"] == pytest.approx(total, abs=1e-12)
+
+
+def test_confirmation_survives_resampling(make_goal, start_pose, cfg):
+    poses = [[0.45, y, 0.09] for y in (0.10, 0.12, 0.14, 0.16)]
+    cup = make_goal("cup", "top", *poses)
+    others = [make_goal(o, "top", [0.3, y, 0.06]) for o, y in (("bowl", -0.2), ("plate", -0.3), ("box", 0.3))]
+    goals = GoalSet((cup, *others))
+    b = Belief.uniform(goals).after_answer("cup:top", True, cfg.intent)
+    r = b.resampled(start_pose, cfg.intent)
+    assert len(r.goals) > len(b.goals)  # copies were made
+    assert r.confirmed == "cup:top"
