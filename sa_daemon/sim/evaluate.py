@@ -92,8 +92,8 @@ def summarise(trials: list[dict]) -> list[dict]:
     return out
 
 
-def format_summary(rows: list[dict]) -> str:
-    """A plain-text table of summaries."""
+def format_summary(rows: list[dict], markdown: bool = False) -> str:
+    """A table of summaries: aligned plain text, or a Markdown table."""
     cols = [
         ("task", "task", "{}"), ("method", "method", "{}"), ("n", "n", "{}"), ("success", "success_rate", "{:.2f}"),
         ("time s", "completion_time_s", "{:.2f}"), ("modes", "mode_changes", "{:.1f}"),
@@ -103,6 +103,9 @@ def format_summary(rows: list[dict]) -> str:
     table = [[h for h, _, _ in cols]]
     for r in rows:
         table.append([("-" if r[k] is None else f.format(r[k])) for _, k, f in cols])
+    if markdown:
+        lines = ["| " + " | ".join(row) + " |" for row in table]
+        return "\n".join([lines[0], "|" + "---|" * len(cols)] + lines[1:])
     widths = [max(len(row[i]) for row in table) for i in range(len(cols))]
     lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))) for row in table]
     return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
