@@ -140,14 +140,14 @@ class _Search:
             keys += [(asked | 1 << q, yes | 1 << q), (asked | 1 << q, yes)]
             beliefs += [by[0, q], bn[0, q]]
         mv = self.move_values(keys, beliefs)
-        can_ask = np.array([len(qs) > 1])
+        can_ask = np.full(2 * len(qs), len(qs) > 1)
+        leaf = self._leaf_bound(np.concatenate((by[0, qs], bn[0, qs])), can_ask)
         out = []
         for j, q in enumerate(qs):
             (my, ay), (mn, an) = mv[2 * j], mv[2 * j + 1]
             pq = float(py[0, q])
             lb = p.q_reward + g * (pq * my + (1 - pq) * mn)
-            uy = max(my, float(self._leaf_bound(by[0, q][None], can_ask)[0]))
-            un = max(mn, float(self._leaf_bound(bn[0, q][None], can_ask)[0]))
+            uy, un = max(my, float(leaf[j])), max(mn, float(leaf[len(qs) + j]))
             free = p.q_reward + g * (pq * uy + (1 - pq) * un)
             if depth > 1:
                 out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, free, free, un))
