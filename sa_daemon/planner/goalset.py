@@ -64,6 +64,12 @@ class GoalSet:
         pos = {t: i for i, t in enumerate(self.targets)}
         return np.array([pos[g.target] for g in self.goals], dtype=int)
 
+    def target_mask(self, target: str) -> np.ndarray:
+        """``(G,)`` bool: which goals belong to high-level ``target`` (all False if unknown)."""
+        if target not in self.targets:
+            return np.zeros(len(self.goals), dtype=bool)
+        return self.target_index == self.targets.index(target)
+
     def desired_indices(self, pose: Pose, rotation_weight_m_per_rad: float) -> np.ndarray:
         """Index of ``k_c`` (closest grasp pose, ``d_trans + w d_rot``) within each goal, ``(G,)``."""
         d = np.linalg.norm(self.positions - pose.position, axis=-1)

@@ -109,8 +109,8 @@ class SharedAutonomyModel:
         ranked = sorted(tp.values(), reverse=True) + [0.0]
         if ranked[0] - ranked[1] > self.cfg.blend.predict_margin:
             top = max(tp, key=tp.__getitem__)
-            copies = [i for i, g in enumerate(goals.goals) if g.target == top]
-            i = max(copies, key=lambda j: probs[j])
+            copies = np.flatnonzero(goals.target_mask(top))
+            i = copies[np.argmax(np.asarray(probs)[copies])]
             return Action(ActionKind.MOVE, int(i), top)
         return NO_ASSIST
 
@@ -124,7 +124,7 @@ class SharedAutonomyModel:
             return action
         w = self.cfg.intent.rotation_weight_m_per_rad
         kc = old.goals[action.goal].desired_pose(pose, w)
-        same = [i for i, g in enumerate(new.goals) if g.target == action.target]
+        same = [int(i) for i in np.flatnonzero(new.target_mask(action.target))]
         owner = [i for i in same if any(p is kc for p in new.goals[i].poses)]
         return Action(ActionKind.MOVE, (owner or same)[0], action.target)
 

@@ -98,6 +98,11 @@ class Problem:
             rewards = rewards * self.gamma**self.H  # received when the pose is reached
         return rewards.T
 
+    def move_values(self, beliefs: FloatArray) -> FloatArray:
+        """Value of the best move for each belief ``(n, G)``: ``(n,)`` (``-inf`` with no move)."""
+        beliefs = np.atleast_2d(beliefs)
+        return (beliefs @ self.M).max(axis=1) if self.moves else np.full(len(beliefs), -np.inf)
+
     def best_moves(self, beliefs: FloatArray) -> tuple[FloatArray, list[Action]]:
         """Best move value and action for each belief ``(n, G)``: ``(n,)`` values and ``n`` actions."""
         vals = np.atleast_2d(beliefs) @ self.M

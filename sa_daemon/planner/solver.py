@@ -63,7 +63,7 @@ class _Search:
         self.all_asked = (1 << self.n_q) - 1
         self.max_depth = min(self.n_q, prob.cfg.planner.max_questions)
         self.m_memo: dict[tuple[int, int], tuple[float, Action]] = {}
-        self.v_memo: dict[tuple[int, int, int], tuple[float, Action]] = {}
+        self.v_memo: dict[tuple[int, int, int], tuple[float, Action, bool]] = {}
         self.free_memo: dict[tuple[int, int], tuple[float, Action]] = {}  # values no depth limit touched
         self.cuts = 0  # nodes where the depth limit stopped a question that might have paid
 
@@ -83,6 +83,10 @@ class _Search:
             self.nodes += len(todo)
         return [self.m_memo[k] for k in keys]
 
+    def _avail(self, asked: int) -> np.ndarray:
+        """``(1, Q)`` mask of the questions not yet asked."""
+        return np.array([[not asked >> q & 1 for q in range(self.n_q)]])
+
     def _children(self, B: FloatArray, avail: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``P(yes)`` ``(n, Q)`` and the beliefs after yes and no ``(n, Q, G)`` for beliefs ``(n, G)``."""
         L = self.p.L_yes
@@ -91,13 +95,14 @@ class _Search:
         bn = B[:, None, :] * (1.0 - L)[None] / np.where(avail, 1.0 - py, 1.0)[..., None]
         return py, by, bn
 
-    def _leaf_bound(self, kids: FloatArray, can_ask: np.ndarray) -> FloatArray:
+    def _leaf_bound(self, kids: FloatArray, can_ask: np.ndarray) -> tuple[FloatArray, FloatArray]:
         """Cheap bound on ``V`` of beliefs ``(n, G)``: ``m`` if no question is left, else
-        ``min(U, max(m, r_q + gamma U))`` (a question's children are bounded by the linear ``U``)."""
+        ``min(U, max(m, r_q + gamma U))`` (a question's children are bounded by the linear ``U``).
+        Returns ``(bound, m)`` with ``m`` the best move value."""
         p = self.p
         u = kids @ p.U
-        m = (kids @ p.M).max(axis=1) if p.M.shape[1] else np.full(len(kids), -np.inf)
-        return np.where(can_ask, np.minimum(u, np.maximum(m, p.q_reward + p.gamma * u)), m)
+        m = p.move_values(kids)
+        return np.where(can_ask, np.minimum(u, np.maximum(m, p.q_reward + p.gamma * u)), m), m
 
     def question_bounds(self, B: FloatArray, avail: np.ndarray, level: int) -> FloatArray:
         """Upper bound ``(n, Q)`` on each question's value (then optimal play) at beliefs ``(n, G)``.
@@ -112,13 +117,12 @@ class _Search:
         py, by, bn = self._children(B, avail)
         kid_avail = (avail[:, None, :] & ~np.eye(nq, dtype=bool)[None]).reshape(n * nq, nq)
         can_ask = kid_avail.any(axis=1)
-        uy = self._leaf_bound(by.reshape(n * nq, -1), can_ask)
+        uy, _ = self._leaf_bound(by.reshape(n * nq, -1), can_ask)
         bn = bn.reshape(n * nq, -1)
-        un = self._leaf_bound(bn, can_ask)
+        un, m = self._leaf_bound(bn, can_ask)
         if level > 0 and can_ask.any():
-            m = (bn[can_ask] @ p.M).max(axis=1) if p.M.shape[1] else np.full(int(can_ask.sum()), -np.inf)
             deeper = self.question_bounds(bn[can_ask], kid_avail[can_ask], level - 1).max(axis=1)
-            un[can_ask] = np.minimum(un[can_ask], np.maximum(m, deeper))
+            un[can_ask] = np.minimum(un[can_ask], np.maximum(m[can_ask], deeper))
         qb = p.q_reward + p.gamma * (py * uy.reshape(n, nq) + (1.0 - py) * un.reshape(n, nq))
         return np.where(avail, qb, -np.inf)
 
@@ -132,7 +136,7 @@ class _Search:
     def expand(self, b: FloatArray, asked: int, yes: int, depth: int) -> list[_Child]:
         """Children of a node, each question with exact one-step and bounded full values, best first."""
         p, g = self.p, self.p.gamma
-        avail = np.array([[not asked >> q & 1 for q in range(self.n_q)]])
+        avail = self._avail(asked)
         qs = np.flatnonzero(avail[0])
         py, by, bn = self._children(b[None], avail)
         keys, beliefs = [], []
@@ -141,7 +145,7 @@ class _Search:
             beliefs += [by[0, q], bn[0, q]]
         mv = self.move_values(keys, beliefs)
         can_ask = np.full(2 * len(qs), len(qs) > 1)
-        leaf = self._leaf_bound(np.concatenate((by[0, qs], bn[0, qs])), can_ask)
+        leaf, _ = self._leaf_bound(np.concatenate((by[0, qs], bn[0, qs])), can_ask)
         out = []
         for j, q in enumerate(qs):
             (my, ay), (mn, an) = mv[2 * j], mv[2 * j + 1]
@@ -149,10 +153,9 @@ class _Search:
             lb = p.q_reward + g * (pq * my + (1 - pq) * mn)
             uy, un = max(my, float(leaf[j])), max(mn, float(leaf[len(qs) + j]))
             free = p.q_reward + g * (pq * uy + (1 - pq) * un)
-            if depth > 1:
-                out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, free, free, un))
-            else:
-                out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, lb, free, mn))
+            # At the depth limit the children are leaves: the one-step value is exact.
+            ub, u_no = (free, un) if depth > 1 else (lb, mn)
+            out.append(_Child(int(q), pq, by[0, q], bn[0, q], my, mn, ay, an, lb, ub, free, u_no))
         out.sort(key=lambda c: -c.lb)
         return out
 
@@ -185,7 +188,7 @@ class _Search:
         bound = -math.inf  # upper bound of the questions not valued exactly
         cuts = self.cuts
         if asked != self.all_asked and p.q_reward + p.gamma * float(b @ p.U) > max(m, alpha):
-            avail = np.array([[not asked >> q & 1 for q in range(self.n_q)]])
+            avail = self._avail(asked)
             # Deep bounds pay at the root; inner nodes are many and their deep bounds rarely prune.
             levels = self.levels if asked == 0 else min(1, self.levels)
             if not self.questions_can_pay(b, avail, max(m, alpha), levels):
@@ -272,7 +275,6 @@ class Solver:
             complete=complete,
             root_values=root_values,
         )
-
 
     def action_values(self, snap: Snapshot) -> dict[Action, float]:
         """Exact value of every root action (then optimal play).
