@@ -154,6 +154,109 @@ class EvalConfig(_Section):
     node_budget: int = Field(3000, ge=1, description="belief evaluations per plan in evaluation")
 
 
+Vec3 = tuple[float, float, float]
+
+
+class RuntimeConfig(_Section):
+    """Rates and timeouts of the daemon's loops (``sa-daemon run``)."""
+
+    control_hz: float = Field(100.0, ge=10, le=500, description="blend, safety and arm command (Hz)")
+    belief_hz: float = Field(40.0, gt=0, le=200, description="belief update = joystick sampling rate (Hz)")
+    publish_hz: float = Field(30.0, ge=20, le=200, description="state messages on the PUB socket (Hz)")
+    question_timeout_s: float = Field(20.0, gt=0, description="an unanswered question is dropped after this (s)")
+    worker_hang_s: float = Field(1.0, gt=0, description="a planner silent this long past its deadline is killed (s)")
+    worker_start_timeout_s: float = Field(30.0, gt=0, description="time a new planner worker has to come up (s)")
+
+
+class SafetyConfig(_Section):
+    """The safety pipeline every arm command passes through (``docs/safety.md``; MoveIt Servo's values)."""
+
+    stale_command_s: float = Field(0.1, gt=0, description="no fresh input for this long: command zero (s)")
+    linear_accel_mps2: float = Field(1.0, gt=0, description="per-axis linear acceleration limit (m/s^2)")
+    angular_accel_radps2: float = Field(4.0, gt=0, description="per-axis angular acceleration limit (rad/s^2)")
+    workspace_min_m: Vec3 = Field((-0.1, -0.6, 0.0), description="workspace box, lower corner (m, base frame)")
+    workspace_max_m: Vec3 = Field((0.8, 0.6, 0.7), description="workspace box, upper corner (m, base frame)")
+    singularity_slow: float = Field(17.0, gt=1, description="Jacobian condition number where slowing starts")
+    singularity_stop: float = Field(30.0, gt=1, description="condition number where motion toward it stops")
+    joint_margin_rad: float = Field(0.1, ge=0, description="halt a joint moving toward a bound within this (rad)")
+
+    @model_validator(mode="after")
+    def _check(self) -> "SafetyConfig":
+        if any(lo >= hi for lo, hi in zip(self.workspace_min_m, self.workspace_max_m)):
+            raise ValueError("workspace_min_m must be below workspace_max_m on every axis")
+        if self.singularity_stop <= self.singularity_slow:
+            raise ValueError("singularity_stop must exceed singularity_slow")
+        return self
+
+
+class MujocoConfig(_Section):
+    """The MuJoCo xArm-6 (``--arm mujoco``)."""
+
+    timestep_s: float = Field(0.002, gt=0, le=0.01, description="physics step (s)")
+    viewer: bool = Field(False, description="open the passive viewer (needs a display)")
+
+
+class XArmConfig(_Section):
+    """The real xArm-6 through the xArm Python SDK (``--arm xarm``, extra ``xarm``)."""
+
+    ip: str = Field("192.168.1.185", min_length=1, description="controller address")
+    command_periods: float = Field(3.0, ge=1, le=20, description="command duration = this many control periods")
+    gripper_speed: float = Field(2000.0, gt=0, le=5000, description="SDK gripper speed (r/min)")
+    reconnect_min_s: float = Field(0.5, gt=0, description="first reconnect delay; doubles up to the max (s)")
+    reconnect_max_s: float = Field(8.0, gt=0, description="longest reconnect delay (s)")
+
+
+class ArmConfig(_Section):
+    """Which arm drives the gripper, and its backend settings."""
+
+    backend: str = Field("kinematic", pattern="^(kinematic|mujoco|xarm)$", description="kinematic, mujoco or xarm")
+    mujoco: MujocoConfig = MujocoConfig()
+    xarm: XArmConfig = XArmConfig()
+
+
+class JoystickConfig(_Section):
+    """The evdev joystick (``--input evdev``): 3 axes drive the current mode's twist."""
+
+    device: str = Field("", description="device path (/dev/input/eventN) or name; empty = first with 3 axes")
+    axes: tuple[str, str, str] = Field(("ABS_X", "ABS_Y", "ABS_RZ"), description="evdev codes of x, y, z")
+    signs: tuple[float, float, float] = Field((1.0, -1.0, 1.0), description="per-axis sign (+1 or -1)")
+    deadzone: float = Field(0.05, ge=0, lt=1, description="smooth deadzone (fraction of full deflection)")
+    button_mode: str = Field("BTN_TRIGGER", description="toggle translation/rotation")
+    button_gripper: str = Field("BTN_THUMB", description="toggle gripper open/closed")
+    button_yes: str = Field("BTN_THUMB2", description="answer yes")
+    button_no: str = Field("BTN_TOP", description="answer no")
+    button_assist: str = Field("BTN_TOP2", description="assistance on/off")
+    button_stop: str = Field("BTN_PINKIE", description="latched stop (released by resume)")
+    grab: bool = Field(False, description="exclusive access to the device")
+    poll_s: float = Field(1.0, gt=0, description="how often a missing device is looked for (s)")
+
+
+class SpeechConfig(_Section):
+    """Spoken questions (pyttsx3 + espeak-ng, in one dedicated worker thread)."""
+
+    enabled: bool = Field(True, description="speak questions (they are always published as events)")
+    rate_wpm: int = Field(150, ge=50, le=400, description="words per minute")
+    volume: float = Field(1.0, ge=0, le=1)
+    wav_dir: str = Field("", description="also write each utterance to a WAV file here (empty: no files)")
+    play: bool = Field(True, description="play through the sound card (off: WAV files only)")
+
+
+class ZmqConfig(_Section):
+    """The ZeroMQ sockets (``docs/protocol.md``)."""
+
+    pub: str = Field("tcp://127.0.0.1:5555", min_length=1, description="PUB endpoint (state, event)")
+    cmd: str = Field("tcp://127.0.0.1:5556", min_length=1, description="command endpoint (REQ clients)")
+    max_request_bytes: int = Field(65536, ge=256, description="longer requests are refused")
+    max_json_depth: int = Field(8, ge=1, le=64, description="deeper requests are refused")
+
+
+class RecordConfig(_Section):
+    """MCAP recording of state (control rate) and events."""
+
+    path: str = Field("", description="MCAP file ('' = no recording; {time} is replaced by a timestamp)")
+    flush_s: float = Field(1.0, gt=0, le=10, description="data reaches the disk at least this often (s)")
+
+
 METHODS = (
     "manual",
     "ho",
@@ -180,6 +283,13 @@ class Config(_Section):
     limits: LimitsConfig = LimitsConfig()
     sim_user: SimUserConfig = SimUserConfig()
     eval: EvalConfig = EvalConfig()
+    runtime: RuntimeConfig = RuntimeConfig()
+    safety: SafetyConfig = SafetyConfig()
+    arm: ArmConfig = ArmConfig()
+    joystick: JoystickConfig = JoystickConfig()
+    speech: SpeechConfig = SpeechConfig()
+    zmq: ZmqConfig = ZmqConfig()
+    record: RecordConfig = RecordConfig()
 
     @model_validator(mode="after")
     def _check_method(self) -> "Config":

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -17,11 +18,34 @@ from ..geometry import FloatArray, Pose
 
 @dataclass(frozen=True)
 class ArmState:
-    """What an arm reports: TCP ``pose`` (base frame), gripper state, and a fault text or ``None``."""
+    """What an arm reports: TCP ``pose`` (base frame), gripper state, a fault text or ``None``, and the
+    joint positions (rad) of an arm that has joints (``None`` for the gripper-only kinematic arm)."""
 
     pose: Pose
     gripper_closed: bool
     fault: str | None = None
+    joints: FloatArray | None = None
+
+
+@runtime_checkable
+class Kinematics(Protocol):
+    """Joint-space kinematics of a serial arm's TCP, as the safety pipeline needs it.
+
+    ``lower``/``upper`` are joint position bounds (rad), ``velocity_limit`` joint speed limits (rad/s).
+    """
+
+    lower: FloatArray
+    upper: FloatArray
+    velocity_limit: FloatArray
+
+    def fk(self, q: FloatArray) -> Pose:
+        """TCP pose (base frame) at joint positions ``q`` (rad)."""
+
+    def jacobian(self, q: FloatArray) -> FloatArray:
+        """6 x n TCP Jacobian mapping joint velocities (rad/s) to the base-frame twist [v (m/s); w (rad/s)]."""
+
+    def joint_velocities(self, q: FloatArray, twist: FloatArray) -> FloatArray:
+        """Joint velocities (rad/s) realising ``twist`` at ``q`` (damped least squares)."""
 
 
 def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float) -> FloatArray:
@@ -38,6 +62,9 @@ class Arm(abc.ABC):
     """A robot arm driven by Cartesian twists."""
 
     name: str = "arm"
+    #: Joint-space kinematics for the safety pipeline (singularity and joint-margin stages); ``None`` for
+    #: an arm without joints.
+    kinematics: Kinematics | None = None
 
     @abc.abstractmethod
     def read(self) -> ArmState:
@@ -53,3 +80,9 @@ class Arm(abc.ABC):
 
     def step(self, dt: float) -> None:  # noqa: B027 - real arms move on their own
         """Advance a simulated arm by ``dt`` s under the held command (no-op for a real arm)."""
+
+    #: ``True`` for arms that move in real time by themselves (the real xArm); simulated arms are stepped.
+    realtime: bool = False
+
+    def close(self) -> None:  # noqa: B027 - most arms hold no resources
+        """Stop the arm and release its resources (connections, threads, viewers). Idempotent."""
