@@ -84,5 +84,8 @@ class Arm(abc.ABC):
     #: ``True`` for arms that move in real time by themselves (the real xArm); simulated arms are stepped.
     realtime: bool = False
 
+    def reset_fault(self) -> None:  # noqa: B027 - simulated arms have no faults to clear
+        """Clear a latched fault and re-enable motion; called only on an explicit ``resume``."""
+
     def close(self) -> None:  # noqa: B027 - most arms hold no resources
         """Stop the arm and release its resources (connections, threads, viewers). Idempotent."""
