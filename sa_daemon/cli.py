@@ -10,6 +10,7 @@ from pathlib import Path
 from .config import METHODS, ConfigError, load_config
 from .planner.goals import parse_target
 from .planner.scene import SceneError, builtin_scene_names, load_scene
+from .runtime import verbs
 
 
 def _scene_arg(args: argparse.Namespace) -> str:
@@ -97,9 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--budget", type=float, default=0.1, help="anytime budget (s)")
     bp.add_argument("--no-peer", action="store_true", help="skip the pomdp_py comparison")
     bp.set_defaults(func=cmd_bench_planner)
+    verbs.add_bench_parsers(bsub)
 
     s = sub.add_parser("scenes", help="list the built-in scenes and their goals")
     s.set_defaults(func=cmd_scenes)
+    verbs.add_parsers(sub)
     return p
 
 
@@ -107,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, SceneError, KeyError, ValueError) as e:
+    except (ConfigError, SceneError, KeyError, ValueError, OSError, TimeoutError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
         print(f"sa-daemon: error: {msg}", file=sys.stderr)
         return 2

@@ -17,7 +17,7 @@ from enum import Enum
 
 import numpy as np
 
-from ..config import BlendConfig, MoveConfig
+from ..config import BlendConfig, InputConfig, MoveConfig
 from ..geometry import FloatArray, rotation_error
 
 
@@ -73,6 +73,16 @@ def mask_to_mode(twist: FloatArray, mode: Mode) -> FloatArray:
         t[..., 3:] = 0.0
     else:
         t[..., :3] = 0.0
+    return t
+
+
+def axes_to_twist(axes: FloatArray, mode: Mode, scale: InputConfig) -> FloatArray:
+    """The user's twist (m/s, rad/s) from three joystick axes in [-1, 1] driving ``mode``."""
+    t = np.zeros(6)
+    if Mode(mode) is Mode.TRANSLATION:
+        t[:3] = np.asarray(axes, dtype=float) * scale.linear_scale_mps
+    else:
+        t[3:] = np.asarray(axes, dtype=float) * scale.angular_scale_radps
     return t
 
 

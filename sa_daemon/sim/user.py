@@ -19,7 +19,7 @@ import numpy as np
 
 from ..config import InputConfig, SimUserConfig
 from ..geometry import FloatArray, Pose, quat_angle, rotation_error
-from ..planner.actions import Mode
+from ..planner.actions import Mode, axes_to_twist
 
 
 class Phase(str, Enum):
@@ -38,12 +38,7 @@ class UserInput:
 
     def twist(self, scale: InputConfig) -> FloatArray:
         """The commanded twist (m/s, rad/s) of these axes in this mode."""
-        t = np.zeros(6)
-        if self.mode is Mode.TRANSLATION:
-            t[:3] = self.axes * scale.linear_scale_mps
-        else:
-            t[3:] = self.axes * scale.angular_scale_radps
-        return t
+        return axes_to_twist(self.axes, self.mode, scale)
 
 
 def _saturate(v: FloatArray, limit: float) -> FloatArray:

@@ -1,0 +1,190 @@
+"""The one safety pipeline between the blended twist and every arm driver (MoveIt Servo's stages).
+
+Stages, in order; each that changes the command adds its :class:`SafetyCode` to the result:
+
+1. ``stopped``       - a latched stop (``stop`` command, e-stop button) holds the arm until ``resume``.
+2. ``arm_fault``     - the driver reports a fault: zero until it is cleared on ``resume``.
+3. ``nan_refused``   - a twist with NaN/inf (or of the wrong shape) becomes zero.
+4. ``stale_input``   - no fresh user input for ``safety.stale_command_s``: zero.
+5. ``speed_limited`` - per-axis linear/angular limits, the whole part scaled so the direction is kept.
+6. ``accel_limited`` - the change from the last output is scaled (direction of the change kept) so no
+   axis accelerates beyond ``linear_accel_mps2``/``angular_accel_radps2``.
+7. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
+8. ``singularity_slow``/``singularity_halt`` - scale ``1 - (k - slow) / (stop - slow)`` when the
+   Jacobian condition number ``k`` is above ``slow`` and the motion increases it; zero at ``stop``.
+9. ``joint_bound``   - a joint within ``joint_margin_rad`` of a bound and moving toward it halts the
+   command (and a joint speed above its limit scales the command).
+
+Stages 1-4 zero the command at once (a stop is never softened by the acceleration limit); stages 7-9
+only reduce speeds. So every output is finite, within the speed limits, never leaves the box, and
+changes by at most the acceleration limit unless a zeroing or position stage says why it did not.
+Stages 8-9 apply to arms with joints (``Arm.kinematics``); the kinematic arm has none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from ..config import LimitsConfig, SafetyConfig
+from ..geometry import FloatArray, Pose
+from .base import Kinematics, limit_twist
+
+
+class SafetyCode(str, Enum):
+    """What the pipeline did to a command; ordered from least to most severe."""
+
+    OK = "ok"
+    SPEED = "speed_limited"
+    ACCEL = "accel_limited"
+    WORKSPACE = "workspace_limited"
+    SINGULARITY_SLOW = "singularity_slow"
+    JOINT_SPEED = "joint_speed_limited"
+    SINGULARITY_HALT = "singularity_halt"
+    JOINT_BOUND = "joint_bound"
+    STALE = "stale_input"
+    NAN = "nan_refused"
+    ARM_FAULT = "arm_fault"
+    STOPPED = "stopped"
+
+
+_SEVERITY = {c: i for i, c in enumerate(SafetyCode)}
+ZERO = np.zeros(6)
+
+
+@dataclass(frozen=True)
+class SafetyResult:
+    """The twist to send (m/s, rad/s, base frame) and the codes of the stages that changed it."""
+
+    twist: FloatArray
+    codes: tuple[SafetyCode, ...]
+
+    @property
+    def status(self) -> SafetyCode:
+        """The most severe code (``ok`` when no stage acted)."""
+        return max(self.codes, key=_SEVERITY.__getitem__, default=SafetyCode.OK)
+
+
+class SafetyPipeline:
+    """Filter each control tick's command. Holds the last output (for the acceleration limit) and the
+    stop latch; ``dt`` is the control period (s)."""
+
+    def __init__(
+        self,
+        cfg: SafetyConfig,
+        limits: LimitsConfig,
+        dt: float,
+        kinematics: Kinematics | None = None,
+    ) -> None:
+        if not dt > 0:
+            raise ValueError("dt must be positive (s)")
+        self.cfg = cfg
+        self.limits = limits
+        self.dt = dt
+        self.kinematics = kinematics
+        self._last = ZERO.copy()
+        self._stopped = False
+        self._lo = np.asarray(cfg.workspace_min_m, dtype=float)
+        self._hi = np.asarray(cfg.workspace_max_m, dtype=float)
+        self._amax = np.array([cfg.linear_accel_mps2] * 3 + [cfg.angular_accel_radps2] * 3)
+
+    # -- the latch -------------------------------------------------------------------------------------
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    def stop(self) -> None:
+        """Latch a stop: every command is zero until :meth:`resume`."""
+        self._stopped = True
+
+    def resume(self) -> None:
+        """Release the latch; the arm restarts from rest (acceleration-limited)."""
+        self._stopped = False
+        self._last = ZERO.copy()
+
+    # -- the filter ------------------------------------------------------------------------------------
+
+    def _zero(self, code: SafetyCode) -> SafetyResult:
+        self._last = ZERO.copy()
+        return SafetyResult(ZERO.copy(), (code,))
+
+    def filter(
+        self,
+        twist: FloatArray,
+        pose: Pose,
+        input_fresh: bool = True,
+        fault: bool = False,
+        joints: FloatArray | None = None,
+    ) -> SafetyResult:
+        """Run every stage on ``twist`` at TCP ``pose`` (and joint positions ``joints``, rad)."""
+        if self._stopped:
+            return self._zero(SafetyCode.STOPPED)
+        if fault:
+            return self._zero(SafetyCode.ARM_FAULT)
+        t = np.asarray(twist, dtype=float) if np.ndim(twist) == 1 else np.full(1, np.nan)
+        if t.shape != (6,) or not np.all(np.isfinite(t)):
+            return self._zero(SafetyCode.NAN)
+        if not input_fresh:
+            return self._zero(SafetyCode.STALE)
+        codes: list[SafetyCode] = []
+        out = limit_twist(t, self.limits.linear_mps, self.limits.angular_radps)
+        if not np.allclose(out, t, rtol=0, atol=1e-12):
+            codes.append(SafetyCode.SPEED)
+        out = self._accel(out, codes)
+        out = self._workspace(out, pose, codes)
+        if self.kinematics is not None and joints is not None:
+            out = self._joint_stages(out, np.asarray(joints, dtype=float), codes)
+        self._last = out.copy()
+        return SafetyResult(out, tuple(codes))
+
+    def _accel(self, t: FloatArray, codes: list[SafetyCode]) -> FloatArray:
+        step = t - self._last
+        ratio = np.max(np.abs(step) / (self._amax * self.dt))
+        if ratio > 1.0:
+            codes.append(SafetyCode.ACCEL)
+            return self._last + step / ratio
+        return t
+
+    def _workspace(self, t: FloatArray, pose: Pose, codes: list[SafetyCode]) -> FloatArray:
+        p = np.asarray(pose.position, dtype=float)
+        v = t[:3]
+        # Fastest speed per axis that keeps p + v dt inside the box (inward motion is always allowed).
+        vmax = np.maximum((self._hi - p) / self.dt, 0.0)
+        vmin = np.minimum((self._lo - p) / self.dt, 0.0)
+        clipped = np.clip(v, vmin, vmax)
+        if np.any(clipped != v):
+            codes.append(SafetyCode.WORKSPACE)
+            t = t.copy()
+            t[:3] = clipped
+        return t
+
+    def _joint_stages(self, t: FloatArray, q: FloatArray, codes: list[SafetyCode]) -> FloatArray:
+        kin = self.kinematics
+        assert kin is not None
+        if not np.any(t):
+            return t
+        c = self.cfg
+        kappa = float(np.linalg.cond(kin.jacobian(q)))
+        if kappa > c.singularity_slow:
+            qdot = kin.joint_velocities(q, t)
+            ahead = float(np.linalg.cond(kin.jacobian(q + qdot * self.dt)))
+            if ahead > kappa:  # moving toward the singularity
+                if kappa >= c.singularity_stop:
+                    codes.append(SafetyCode.SINGULARITY_HALT)
+                    return ZERO.copy()
+                codes.append(SafetyCode.SINGULARITY_SLOW)
+                t = t * (1.0 - (kappa - c.singularity_slow) / (c.singularity_stop - c.singularity_slow))
+        qdot = kin.joint_velocities(q, t)
+        near_lo = (q - kin.lower < c.joint_margin_rad) & (qdot < 0)
+        near_hi = (kin.upper - q < c.joint_margin_rad) & (qdot > 0)
+        if np.any(near_lo | near_hi):
+            codes.append(SafetyCode.JOINT_BOUND)
+            return ZERO.copy()
+        ratio = float(np.max(np.abs(qdot) / kin.velocity_limit))
+        if ratio > 1.0:
+            codes.append(SafetyCode.JOINT_SPEED)
+            t = t / ratio
+        return t

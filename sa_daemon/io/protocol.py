@@ -1,0 +1,133 @@
+"""The ZeroMQ protocol of ``docs/protocol.md``: request validation and message encoding.
+
+Pure functions, no sockets: the server (:mod:`.server`) and any client share them. Version
+:data:`PROTOCOL_VERSION` is in every state message and in the ``status`` reply.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from ..config import METHODS
+
+PROTOCOL_VERSION = 1
+TOPIC_STATE = b"state"
+TOPIC_EVENT = b"event"
+
+COMMANDS = ("status", "answer", "stop", "resume", "set_method")
+
+
+class RequestError(ValueError):
+    """A refused request; the message is the ``error`` of the reply."""
+
+
+@dataclass(frozen=True)
+class Request:
+    """A validated command: ``cmd`` and its arguments."""
+
+    cmd: str
+    args: dict[str, Any]
+
+
+def _depth(obj: Any, limit: int) -> int:
+    """Nesting depth of a decoded JSON value, iteratively (never recursion), stopping past ``limit``."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(obj, 1)]
+    while stack:
+        o, d = stack.pop()
+        if isinstance(o, (dict, list)):
+            deepest = max(deepest, d)
+            if deepest > limit:
+                return deepest
+            stack.extend((v, d + 1) for v in (o.values() if isinstance(o, dict) else o))
+    return deepest
+
+
+def _bracket_depth(text: str) -> int:
+    """Upper bound of the nesting depth from the raw text, so a hostile document is refused before
+    ``json.loads`` recurses into it."""
+    depth = peak = 0
+    in_str = esc = False
+    for ch in text:
+        if in_str:
+            if esc:
+                esc = False
+            elif ch == "\\":
+                esc = True
+            elif ch == '"':
+                in_str = False
+        elif ch == '"':
+            in_str = True
+        elif ch in "[{":
+            depth += 1
+            peak = max(peak, depth)
+        elif ch in "]}":
+            depth -= 1
+    return peak
+
+
+def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Request:
+    """Decode and validate one request; raise :class:`RequestError` with the reason otherwise."""
+    if len(raw) > max_bytes:
+        raise RequestError(f"request too large: {len(raw)} bytes (limit {max_bytes})")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise RequestError("request is not UTF-8 text") from None
+    if _bracket_depth(text) > max_depth:
+        raise RequestError(f"request nested deeper than {max_depth} levels")
+    try:
+        obj = json.loads(text, parse_constant=_refuse_constant)
+    except RequestError:
+        raise
+    except (ValueError, RecursionError) as e:
+        raise RequestError(f"request is not valid JSON: {e}") from None
+    if _depth(obj, max_depth) > max_depth:
+        raise RequestError(f"request nested deeper than {max_depth} levels")
+    if not isinstance(obj, dict):
+        raise RequestError(f"request must be a JSON object, got {type(obj).__name__}")
+    cmd = obj.get("cmd")
+    if not isinstance(cmd, str):
+        raise RequestError('request needs "cmd" (a string)')
+    if cmd not in COMMANDS:
+        raise RequestError(f"unknown command {cmd[:40]!r} (one of {', '.join(COMMANDS)})")
+    args = {k: v for k, v in obj.items() if k != "cmd"}
+    allowed = {"answer": {"value"}, "set_method": {"method"}}.get(cmd, set())
+    extra = sorted(set(args) - allowed - {"id"})
+    if extra:
+        raise RequestError(f"{cmd}: unexpected field(s) {', '.join(repr(e[:40]) for e in extra[:5])}")
+    if cmd == "answer":
+        value = args.get("value")
+        if value not in ("yes", "no"):
+            raise RequestError('answer: "value" must be "yes" or "no"')
+    if cmd == "set_method":
+        method = args.get("method")
+        if not isinstance(method, str) or method not in METHODS:
+            raise RequestError(f'set_method: "method" must be one of {", ".join(METHODS)}')
+    return Request(cmd, args)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise RequestError(f"request contains {name}, which is not JSON")
+
+
+def encode(obj: Any) -> bytes:
+    """Compact JSON; NaN/inf are refused (they never reach a client either)."""
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+
+
+def ok(**fields: Any) -> bytes:
+    return encode({"ok": True, **fields})
+
+
+def error(reason: str) -> bytes:
+    return encode({"ok": False, "error": reason})
+
+
+def finite_list(values: Any, ndigits: int = 6) -> list[float]:
+    """A JSON-ready list of rounded floats; non-finite values become 0 (and are counted as a fault
+    upstream: the safety pipeline never lets them reach the arm)."""
+    return [round(float(v), ndigits) if math.isfinite(float(v)) else 0.0 for v in values]

@@ -1,0 +1,86 @@
+"""ZeroMQ sockets of the daemon: a PUB socket for ``state``/``event`` and a ROUTER for commands.
+
+PUB never blocks: each send is ``NOBLOCK`` with a small high-water mark, so a slow or absent subscriber
+loses messages instead of slowing a loop. The command socket is a ROUTER so that any number of REQ
+clients can talk to it; each request gets exactly one reply, in the REQ envelope it came with.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from typing import Any, Callable
+
+import zmq
+import zmq.asyncio
+
+from . import protocol
+
+log = logging.getLogger(__name__)
+
+Handler = Callable[[protocol.Request], dict[str, Any]]
+
+
+class ZmqServer:
+    """Bind ``pub`` and ``cmd`` endpoints; :meth:`serve` answers commands with ``handler``."""
+
+    def __init__(self, pub: str, cmd: str, max_request_bytes: int = 65536, max_json_depth: int = 8) -> None:
+        self.ctx = zmq.asyncio.Context()
+        self.max_request_bytes = max_request_bytes
+        self.max_json_depth = max_json_depth
+        self.dropped = 0  # messages a full PUB queue refused
+        self.requests = 0
+        self.refused = 0
+        self.pub = self.ctx.socket(zmq.PUB)
+        self.pub.setsockopt(zmq.SNDHWM, 200)
+        self.pub.setsockopt(zmq.LINGER, 0)
+        self.cmd = self.ctx.socket(zmq.ROUTER)
+        self.cmd.setsockopt(zmq.LINGER, 0)
+        # Frames beyond this are dropped by libzmq before they reach us (the limit check below
+        # answers anything between max_request_bytes and this with a reason).
+        self.cmd.setsockopt(zmq.MAXMSGSIZE, 16 * max_request_bytes)
+        try:
+            self.pub.bind(pub)
+            self.cmd.bind(cmd)
+        except zmq.ZMQError as e:
+            self.close()
+            raise OSError(f"cannot bind ZeroMQ endpoint ({pub}, {cmd}): {e}") from None
+        self.pub_endpoint = self.pub.getsockopt_string(zmq.LAST_ENDPOINT)
+        self.cmd_endpoint = self.cmd.getsockopt_string(zmq.LAST_ENDPOINT)
+
+    def publish(self, topic: bytes, obj: dict[str, Any]) -> None:
+        """Send ``[topic, JSON]`` without ever blocking (dropped when the queue is full)."""
+        try:
+            self.pub.send_multipart([topic, protocol.encode(obj)], flags=zmq.NOBLOCK)
+        except zmq.Again:
+            self.dropped += 1
+
+    async def serve(self, handler: Handler) -> None:
+        """Answer commands forever (cancel to stop). A handler exception becomes ``ok: false``."""
+        while True:
+            frames = await self.cmd.recv_multipart()
+            if len(frames) < 2:
+                continue
+            # REQ envelope: [identity, b"", payload]; a DEALER may omit the empty delimiter.
+            envelope, payload = frames[:-1], frames[-1]
+            self.requests += 1
+            try:
+                req = protocol.parse_request(payload, self.max_request_bytes, self.max_json_depth)
+                reply = protocol.encode({"ok": True, **handler(req)})
+            except protocol.RequestError as e:
+                self.refused += 1
+                reply = protocol.error(str(e))
+            except Exception as e:  # noqa: BLE001 - the daemon goes on whatever a request does
+                self.refused += 1
+                log.exception("command failed")
+                reply = protocol.error(f"internal error: {type(e).__name__}: {e}")
+            try:
+                await self.cmd.send_multipart([*envelope, reply], flags=zmq.NOBLOCK)
+            except zmq.ZMQError:
+                pass  # the client went away
+            await asyncio.sleep(0)
+
+    def close(self) -> None:
+        for s in (self.pub, self.cmd):
+            s.close(linger=0)
+        self.ctx.term()

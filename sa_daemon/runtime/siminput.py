@@ -1,0 +1,71 @@
+"""The simulated user as a real-time input backend (``--input sim``).
+
+It drives the same pipeline as a joystick: every belief tick it looks at the arm, moves its stick (and
+switches mode) like the evaluation's user, answers a pending question after ``answer_delay_s``, and
+closes the gripper at its goal. Tasks run back to back: after a grasp the scene is reset and the next
+task of the list starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Config
+from ..geometry import Pose
+from ..planner.actions import Mode
+from ..planner.scene import Scene
+from ..sim.episode import desired_pose
+from ..sim.user import SimulatedUser
+
+
+@dataclass(frozen=True)
+class SimSample:
+    """One sample of the simulated user: axes in [-1, 1], mode, and whether it closes the gripper."""
+
+    axes: np.ndarray
+    mode: Mode
+    close: bool
+
+
+class SimInput:
+    """Cycle through ``tasks`` with a fresh :class:`SimulatedUser` per task (seeded per run and task)."""
+
+    def __init__(self, scene: Scene, tasks: list[str], cfg: Config, dt: float, seed: int = 0) -> None:
+        if not tasks:
+            raise ValueError("the simulated user needs at least one task (--task object:grasp_type)")
+        for t in tasks:
+            scene.goal(t)  # raises a SceneError naming the unknown task
+        self.scene, self.tasks, self.cfg, self.dt, self.seed = scene, tasks, cfg, dt, seed
+        self.index = -1
+        self.user: SimulatedUser | None = None
+        self.task_started = 0.0
+
+    @property
+    def task(self) -> str | None:
+        return self.tasks[self.index % len(self.tasks)] if self.index >= 0 else None
+
+    def next_task(self, start: Pose, now: float) -> str:
+        """Begin the next task (wrapping around) from the arm's ``start`` pose; return its name."""
+        self.index += 1
+        task = self.tasks[self.index % len(self.tasks)]
+        rng = np.random.default_rng([self.seed, self.index])
+        goal = self.scene.goal(task)
+        want = desired_pose(goal, start, self.cfg, rng, "closest")
+        self.user = SimulatedUser(task, want, self.cfg.sim_user, self.cfg.input, rng, self.dt)
+        self.task_started = now
+        return task
+
+    def sample(self, pose: Pose, listening: bool) -> SimSample:
+        """The user's stick at this instant (call once per belief tick)."""
+        assert self.user is not None, "next_task() first"
+        inp = self.user.act(pose, listening=listening)
+        return SimSample(np.asarray(inp.axes, dtype=float), inp.mode, bool(inp.close))
+
+    def answer(self, target: str) -> bool:
+        assert self.user is not None
+        return self.user.answer(target)
+
+    def at_goal(self, pose: Pose) -> bool:
+        return self.user is not None and self.user.at_goal(pose)

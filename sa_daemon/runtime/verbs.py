@@ -1,0 +1,179 @@
+"""The daemon's command-line verbs: ``run``, ``monitor``, ``answer``, ``plot`` and ``bench loop``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..config import METHODS, Config, config_from_dict, load_config
+from ..planner.scene import builtin_scene_names, load_scene
+
+DEFAULT_SCENE = "scene1"
+DEFAULT_TASK = "cup:top"  # the paper's task 1
+
+
+def override(cfg: Config, updates: dict[str, Any]) -> Config:
+    """``cfg`` with dotted keys replaced (``{"speech.wav_dir": "out"}``), validated again."""
+    data = cfg.model_dump(mode="json")
+    for key, value in updates.items():
+        node = data
+        *path, last = key.split(".")
+        for p in path:
+            node = node[p]
+        node[last] = value
+    return config_from_dict(data, "command line")
+
+
+def _run_config(args: argparse.Namespace) -> Config:
+    cfg = load_config(args.config)
+    updates: dict[str, Any] = {}
+    if args.arm:
+        updates["arm.backend"] = args.arm
+    if args.method:
+        updates["method"] = args.method
+    if args.pub:
+        updates["zmq.pub"] = args.pub
+    if args.cmd:
+        updates["zmq.cmd"] = args.cmd
+    if args.record:
+        updates["record.path"] = args.record
+    if args.speech_wav:
+        updates["speech.wav_dir"] = args.speech_wav
+    if args.no_speech:
+        updates["speech.enabled"] = False
+    return override(cfg, updates) if updates else cfg
+
+
+def build_daemon(args: argparse.Namespace) -> Any:
+    """The :class:`~.daemon.Daemon` that ``run`` (and ``bench loop``) would start."""
+    from .daemon import Daemon, RunOptions
+
+    cfg = _run_config(args)
+    scene = load_scene(args.scene_file or args.scene or DEFAULT_SCENE)
+    tasks = args.task or ([DEFAULT_TASK] if DEFAULT_TASK in scene.targets else scene.targets[:1])
+    opts = RunOptions(
+        scene=scene, arm=cfg.arm.backend, input=args.input, tasks=tasks, method=cfg.method,
+        pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=args.duration, record=cfg.record.path or None,
+        seed=args.seed, progress=not args.quiet, exit_when_done=args.duration is None,
+    )
+    return Daemon(cfg, opts)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .rate import new_event_loop
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    daemon = build_daemon(args)
+    loop = new_event_loop()
+    try:
+        code = loop.run_until_complete(daemon.run())
+    finally:
+        loop.close()
+    figs = daemon.loop_figures()
+    done = figs["tasks_done"]
+    print(
+        f"sa-daemon: ran {daemon.now():.1f} s | control {figs.get('rate_hz', 0):.1f} Hz, period error p99 "
+        f"{figs.get('period_err_ms_p99', 0):.3f} ms | input->command p99 {figs['input_to_command_ms_p99']:.2f} ms | "
+        f"{figs['plans']} plans, {figs['planner_restarts']} planner restarts | "
+        + (", ".join(f"{d['task']} {'success' if d['success'] else 'failure'} in {d['time_s']:.1f} s" for d in done)
+           or "no task finished"),
+        file=sys.stderr,
+    )
+    if daemon.recorder is not None:
+        print(f"sa-daemon: recording in {daemon.recorder.path} (sa-daemon plot {daemon.recorder.path})", file=sys.stderr)
+    return code
+
+
+def cmd_answer(args: argparse.Namespace) -> int:
+    from ..io.client import request
+
+    cfg = load_config(args.config)
+    reply = request(args.cmd or cfg.zmq.cmd, {"cmd": "answer", "value": args.value}, timeout_s=args.timeout)
+    print(json.dumps(reply))
+    return 0 if reply.get("ok") else 1
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    from .monitor import monitor
+
+    cfg = load_config(args.config)
+    return monitor(args.pub or cfg.zmq.pub, duration_s=args.duration, once=args.once)
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from ..sim.plots import plot_timeline
+    from .replay import recording_to_trial
+
+    trial = recording_to_trial(args.recording)
+    out = Path(args.out) if args.out else Path(args.recording).with_suffix(".png")
+    plot_timeline(trial, out)
+    print(f"wrote {out} ({len(trial.timeline.t) if trial.timeline else 0} states)")
+    return 0
+
+
+def cmd_bench_loop(args: argparse.Namespace) -> int:
+    from ..bench.loop import format_loop, run_loop_bench
+
+    figs = run_loop_bench(args)
+    print(format_loop(figs))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(figs, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """The flags of ``run`` (shared with ``bench loop``)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--scene", help=f"built-in scene ({', '.join(builtin_scene_names())}; default {DEFAULT_SCENE})")
+    g.add_argument("--scene-file", help="scene TOML file (docs/scenes.md)")
+    p.add_argument("--arm", choices=["kinematic", "mujoco", "xarm"], help="arm backend (default: config arm.backend)")
+    p.add_argument("--input", choices=["sim", "evdev"], default="sim", help="joystick or simulated user")
+    p.add_argument("--task", action="append", help=f"sim user's task object:grasp_type, repeatable (default {DEFAULT_TASK})")
+    p.add_argument("--method", choices=METHODS, help="assistance method (default: config method)")
+    p.add_argument("--pub", help="PUB endpoint (default: config zmq.pub)")
+    p.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
+    p.add_argument("--record", help="MCAP file to record to ({time} = timestamp)")
+    p.add_argument("--speech-wav", help="also write every spoken question as a WAV file in this folder")
+    p.add_argument("--no-speech", action="store_true", help="publish questions without speaking them")
+    p.add_argument("--seed", type=int, default=0, help="simulated user's random seed")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def add_parsers(sub: Any) -> None:
+    """Register the daemon verbs on the ``sa-daemon`` sub-parser."""
+    r = sub.add_parser("run", help="run the daemon (arm, input, planner, speech, ZeroMQ)")
+    add_run_options(r)
+    r.add_argument("--duration", type=float, help="stop cleanly after this many seconds (default: with "
+                   "the sim user, when its tasks are done; with a joystick, never)")
+    r.set_defaults(func=cmd_run)
+
+    m = sub.add_parser("monitor", help="live view of a running daemon (over ZeroMQ)")
+    m.add_argument("--pub", help="PUB endpoint (default: config zmq.pub)")
+    m.add_argument("--duration", type=float, help="stop after this many seconds")
+    m.add_argument("--once", action="store_true", help="print one state and exit")
+    m.set_defaults(func=cmd_monitor)
+
+    a = sub.add_parser("answer", help="answer the pending question")
+    a.add_argument("value", choices=["yes", "no"])
+    a.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
+    a.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the reply")
+    a.set_defaults(func=cmd_answer)
+
+    pl = sub.add_parser("plot", help="Fig. 4 timeline of a recording (MCAP)")
+    pl.add_argument("recording")
+    pl.add_argument("--out", help="PNG path (default: next to the recording)")
+    pl.set_defaults(func=cmd_plot)
+
+
+def add_bench_parsers(bsub: Any) -> None:
+    bl = bsub.add_parser("loop", help="daemon loop rates, jitter, latency and memory with the sim user")
+    add_run_options(bl)
+    bl.add_argument("--duration", type=float, default=30.0, help="seconds to run (default 30)")
+    bl.add_argument("--json", help="write the figures to this file")
+    bl.set_defaults(func=cmd_bench_loop)
