@@ -1,0 +1,221 @@
+"""The safety pipeline: each stage, and properties over thousands of random twists, poses and timings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sa_daemon.arm.safety import SafetyCode, SafetyPipeline
+from sa_daemon.config import LimitsConfig, SafetyConfig
+from sa_daemon.geometry import Pose
+
+CFG = SafetyConfig()
+LIM = LimitsConfig()
+DT = 0.01
+CENTRE = Pose(np.array([0.35, 0.0, 0.3]), np.array([1.0, 0.0, 0.0, 0.0]))
+AMAX = np.array([CFG.linear_accel_mps2] * 3 + [CFG.angular_accel_radps2] * 3)
+
+
+def pipe(**kw) -> SafetyPipeline:
+    return SafetyPipeline(CFG, LIM, DT, **kw)
+
+
+def ramp(p: SafetyPipeline, twist, pose=CENTRE, n=200, joints=None):
+    r = None
+    for _ in range(n):
+        r = p.filter(twist, pose, joints=joints)
+    return r
+
+
+def test_small_twist_passes_after_ramp_up():
+    r = ramp(pipe(), [0.05, 0, 0, 0, 0, 0.1])
+    assert r.codes == () and r.status is SafetyCode.OK
+    np.testing.assert_allclose(r.twist, [0.05, 0, 0, 0, 0, 0.1])
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0, 0, 0, 0, 0], [0, 0, np.inf, 0, 0, 0], [1, 2, 3], "x", None])
+def test_nan_inf_and_wrong_shape_become_zero(bad):
+    p = pipe()
+    ramp(p, [0.05, 0, 0, 0, 0, 0])
+    r = p.filter(bad, CENTRE)
+    assert r.status is SafetyCode.NAN and not np.any(r.twist)
+
+
+def test_stale_input_is_zero_at_once():
+    p = pipe()
+    ramp(p, [0.1, 0, 0, 0, 0, 0])
+    r = p.filter([0.1, 0, 0, 0, 0, 0], CENTRE, input_fresh=False)
+    assert r.status is SafetyCode.STALE and not np.any(r.twist)
+
+
+def test_stop_latches_until_resume_and_restarts_from_rest():
+    p = pipe()
+    ramp(p, [0.1, 0, 0, 0, 0, 0])
+    p.stop()
+    for _ in range(5):
+        r = p.filter([0.1, 0, 0, 0, 0, 0], CENTRE)
+        assert r.status is SafetyCode.STOPPED and not np.any(r.twist)
+    p.resume()
+    r = p.filter([0.1, 0, 0, 0, 0, 0], CENTRE)
+    assert SafetyCode.ACCEL in r.codes and r.twist[0] == pytest.approx(CFG.linear_accel_mps2 * DT)
+
+
+def test_arm_fault_zeroes():
+    r = pipe().filter([0.1, 0, 0, 0, 0, 0], CENTRE, fault=True)
+    assert r.status is SafetyCode.ARM_FAULT and not np.any(r.twist)
+
+
+def test_speed_limit_keeps_direction():
+    r = ramp(pipe(), [1.0, 0.5, 0, 0, 0, 0])
+    assert SafetyCode.SPEED in r.codes
+    assert r.twist[0] == pytest.approx(LIM.linear_mps)
+    assert r.twist[1] / r.twist[0] == pytest.approx(0.5)
+
+
+def test_acceleration_limited_from_rest():
+    r = pipe().filter([0.2, 0, 0, 0, 0, 0], CENTRE)
+    assert SafetyCode.ACCEL in r.codes
+    assert r.twist[0] == pytest.approx(CFG.linear_accel_mps2 * DT)
+
+
+def test_workspace_blocks_leaving_but_allows_returning():
+    hi = np.asarray(CFG.workspace_max_m)
+    at_edge = Pose(np.array([0.35, 0.0, hi[2] - 1e-4]), CENTRE.quat_wxyz)
+    p = pipe()
+    r = ramp(p, [0, 0, 0.1, 0, 0, 0], pose=at_edge, n=50)
+    assert SafetyCode.WORKSPACE in r.codes
+    assert at_edge.position[2] + r.twist[2] * DT <= hi[2] + 1e-12
+    r = ramp(p, [0, 0, -0.1, 0, 0, 0], pose=at_edge, n=50)
+    assert r.twist[2] == pytest.approx(-0.1) and SafetyCode.WORKSPACE not in r.codes
+
+
+class _Kin:
+    """A 6-joint arm whose Jacobian is diagonal with configurable conditioning (test double of the
+    ``Kinematics`` protocol: the real one is Pinocchio's, tested in test_arm_kinematics)."""
+
+    def __init__(self, kappa_of_q):
+        self.lower = np.full(6, -2.0)
+        self.upper = np.full(6, 2.0)
+        self.velocity_limit = np.full(6, 2.14)
+        self.kappa_of_q = kappa_of_q
+
+    def jacobian(self, q):
+        k = self.kappa_of_q(np.asarray(q))
+        return np.diag([1.0, 1.0, 1.0, 1.0, 1.0, 1.0 / k])
+
+    def joint_velocities(self, q, twist):
+        return np.linalg.solve(self.jacobian(q), np.asarray(twist, dtype=float))
+
+    def fk(self, q):  # pragma: no cover - unused here
+        return CENTRE
+
+
+def test_singularity_slows_then_halts_when_moving_toward_it():
+    kin = _Kin(lambda q: 10.0 + 20.0 * q[0])  # kappa grows with q0
+    twist = [0.05, 0, 0, 0, 0, 0]
+    q_slow = np.array([0.4, 0, 0, 0, 0, 0])  # kappa 18
+    p = pipe(kinematics=kin)
+    for _ in range(100):
+        r = p.filter(twist, CENTRE, joints=q_slow)
+    assert r.status is SafetyCode.SINGULARITY_SLOW
+    assert r.twist[0] == pytest.approx(0.05 * (1 - (18 - 17) / 13))
+    r = p.filter(twist, CENTRE, joints=np.array([1.2, 0, 0, 0, 0, 0]))  # kappa 34
+    assert r.status is SafetyCode.SINGULARITY_HALT and not np.any(r.twist)
+    # Moving away from it is allowed at full speed.
+    p2 = pipe(kinematics=kin)
+    for _ in range(100):
+        r = p2.filter([-0.05, 0, 0, 0, 0, 0], CENTRE, joints=np.array([1.2, 0, 0, 0, 0, 0]))
+    assert r.codes == () and r.twist[0] == pytest.approx(-0.05)
+
+
+def test_joint_near_bound_halts_only_toward_it():
+    kin = _Kin(lambda q: 1.0)
+    q = np.array([0, 0, 1.95, 0, 0, 0])  # joint 3 within 0.1 rad of +2
+    p = pipe(kinematics=kin)
+    r = p.filter([0, 0, 0.005, 0, 0, 0], CENTRE, joints=q)
+    assert r.status is SafetyCode.JOINT_BOUND and not np.any(r.twist)
+    r = p.filter([0, 0, -0.005, 0, 0, 0], CENTRE, joints=q)
+    assert SafetyCode.JOINT_BOUND not in r.codes and r.twist[2] < 0
+
+
+def test_joint_speed_scales_the_whole_command():
+    kin = _Kin(lambda q: 16.0)  # joint 6 needs 16x the angular speed
+    p = pipe(kinematics=kin)
+    r = ramp(p, [0, 0, 0, 0, 0, 0.5], n=300, joints=np.zeros(6))
+    assert SafetyCode.JOINT_SPEED in r.codes
+    qdot = kin.joint_velocities(np.zeros(6), r.twist)
+    assert np.max(np.abs(qdot)) <= 2.14 + 1e-9
+
+
+def test_most_severe_code_is_the_status():
+    p = pipe()
+    r = p.filter([5.0, 0, 0, 0, 0, 0], CENTRE)
+    assert set(r.codes) >= {SafetyCode.SPEED, SafetyCode.ACCEL}
+    assert r.status is SafetyCode.ACCEL
+
+
+# -- properties -------------------------------------------------------------------------------------
+
+finite = st.floats(min_value=-5.0, max_value=5.0, allow_nan=False)
+anything = st.one_of(finite, st.just(float("nan")), st.just(float("inf")), st.just(-float("inf")))
+twists = st.lists(anything, min_size=6, max_size=6)
+lo, hi = np.asarray(CFG.workspace_min_m), np.asarray(CFG.workspace_max_m)
+positions = st.tuples(*[st.floats(min_value=float(a) - 0.05, max_value=float(b) + 0.05) for a, b in zip(lo, hi)])
+steps = st.lists(
+    st.tuples(twists, positions, st.booleans(), st.booleans(), st.sampled_from(["none", "stop", "resume"])),
+    min_size=1, max_size=40,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(steps)
+def test_every_output_respects_every_limit(seq):
+    """Finite; within per-axis speed limits; never moves (further) out of the box; acceleration
+    within limits unless a zeroing or position stage says why; zero while stopped or stale."""
+    p = pipe()
+    last = np.zeros(6)
+    for twist, pos, fresh, fault, latch in seq:
+        if latch == "stop":
+            p.stop()
+        elif latch == "resume":
+            p.resume()
+            last = np.zeros(6)
+        pose = Pose(np.array(pos), CENTRE.quat_wxyz)
+        r = p.filter(twist, pose, input_fresh=fresh, fault=fault)
+        out = r.twist
+        assert out.shape == (6,) and np.all(np.isfinite(out))
+        assert np.all(np.abs(out[:3]) <= LIM.linear_mps + 1e-12)
+        assert np.all(np.abs(out[3:]) <= LIM.angular_radps + 1e-12)
+        nxt = pose.position + out[:3] * DT
+        outside_before = np.maximum(lo - pose.position, 0) + np.maximum(pose.position - hi, 0)
+        outside_after = np.maximum(lo - nxt, 0) + np.maximum(nxt - hi, 0)
+        assert np.all(outside_after <= outside_before + 1e-12)
+        if p.stopped or fault or not fresh or not np.all(np.isfinite(np.asarray(twist, float))):
+            assert not np.any(out)
+        zeroing = {SafetyCode.STOPPED, SafetyCode.ARM_FAULT, SafetyCode.NAN, SafetyCode.STALE}
+        if not (set(r.codes) & (zeroing | {SafetyCode.WORKSPACE})):
+            assert np.all(np.abs(out - last) <= AMAX * DT + 1e-9)
+        last = out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(twists, st.lists(st.floats(-2.5, 2.5), min_size=6, max_size=6)), min_size=1, max_size=30))
+def test_joint_stages_never_drive_a_joint_past_its_margin_or_speed(seq):
+    kin = _Kin(lambda q: 1.0 + 40.0 * abs(float(q[0])) / 2.5)
+    p = pipe(kinematics=kin)
+    for twist, q in seq:
+        q = np.clip(np.array(q), kin.lower, kin.upper)
+        r = p.filter(twist, CENTRE, joints=q)
+        if not np.any(r.twist):
+            continue
+        qdot = kin.joint_velocities(q, r.twist)
+        assert np.all(np.abs(qdot) <= kin.velocity_limit + 1e-9)
+        near_lo = q - kin.lower < CFG.joint_margin_rad
+        near_hi = kin.upper - q < CFG.joint_margin_rad
+        assert not np.any(near_lo & (qdot < 0)) and not np.any(near_hi & (qdot > 0))
+        kappa = np.linalg.cond(kin.jacobian(q))
+        if kappa >= CFG.singularity_stop:
+            ahead = np.linalg.cond(kin.jacobian(q + qdot * DT))
+            assert ahead <= kappa + 1e-9
