@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import zmq
 import zmq.asyncio
@@ -70,7 +71,7 @@ class ZmqServer:
             except protocol.RequestError as e:
                 self.refused += 1
                 reply = protocol.error(str(e))
-            except Exception as e:  # noqa: BLE001 - the daemon goes on whatever a request does
+            except Exception as e:
                 self.refused += 1
                 log.exception("command failed")
                 reply = protocol.error(f"internal error: {type(e).__name__}: {e}")

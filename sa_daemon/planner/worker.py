@@ -14,10 +14,10 @@ from __future__ import annotations
 import asyncio
 import multiprocessing as mp
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 from multiprocessing.connection import Connection
-from typing import Callable
 
 from .snapshot import PlanResult, Snapshot
 

@@ -21,14 +21,16 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import gc
 import logging
 import math
 import os
 import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -620,7 +622,7 @@ class Daemon:
         """Start everything, run until stopped (signal, ``--duration``, tasks done), stop safely."""
         self._loop = asyncio.get_running_loop()
         self._stop_event = asyncio.Event()
-        cfg, opts = self.cfg, self.opts
+        opts = self.opts
         tasks: list[asyncio.Task] = []
         try:
             self._start_components()
@@ -636,6 +638,10 @@ class Daemon:
             if self.joystick is not None:
                 tasks.append(asyncio.create_task(self.joystick.run(), name="joystick"))
             await self._wait_ready()
+            # Everything long-lived now exists: move it out of the collector's sight so that a full
+            # collection never has to walk it during a control tick.
+            gc.collect()
+            gc.freeze()
             self.notifier.notify("READY=1", f"STATUS=running {opts.arm} arm, {opts.input} input, {self.method}")
             self.event("ready", arm=self.arm.name if self.arm else opts.arm, input=opts.input, method=self.method,
                        scene=opts.scene.name,

@@ -19,13 +19,15 @@ def _vec(v: list[float]) -> str:
 def render(state: dict[str, Any], events: deque[str]) -> str:
     """One screen: belief bars per goal, action, question, mode, twists, planner and safety status."""
     lines = [
-        f"sa-daemon  t={state['t']:.2f} s  method={state['method']}  mode={state['mode']}  "
-        f"assist={'on' if state.get('assist', True) else 'off'}  stopped={state.get('stopped', False)}",
+        (
+            f"sa-daemon  t={state['t']:.2f} s  method={state['method']}  mode={state['mode']}  "
+            f"assist={'on' if state.get('assist', True) else 'off'}  stopped={state.get('stopped', False)}"
+        ),
         "",
         "belief:",
     ]
     for b in sorted(state["belief"], key=lambda b: -b["p"]):
-        n = int(round(b["p"] * BAR))
+        n = round(b["p"] * BAR)
         lines.append(f"  {b['goal']:<32} {'#' * n}{'.' * (BAR - n)} {b['p']:.3f}")
     a = state["action"]
     lines += [

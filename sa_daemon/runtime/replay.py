@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..sim.episode import Timeline, TrialResult
 from ..io.recorder import read_recording
+from ..sim.episode import Timeline, TrialResult
 
 
 def recording_to_trial(path: str | Path) -> TrialResult:

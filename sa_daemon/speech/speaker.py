@@ -23,9 +23,10 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from ..config import SpeechConfig
 
@@ -122,7 +123,7 @@ class Speaker:
             self.busy_since = None
             try:
                 self.on_done(spoken)
-            except Exception:  # noqa: BLE001 - a broken callback must not end speech
+            except Exception:
                 log.exception("speech callback failed")
 
     def _wav_path(self, text: str) -> tuple[Path, bool]:
