@@ -82,6 +82,9 @@ class RewardConfig(_Section):
     opposition_penalty: float = Field(-5.0, le=0)
     opposition_threshold: float = Field(0.01, ge=0, description="|a_i| above this in both twists")
     question: float = Field(-5.0, le=0)
+    question_time_s: float = Field(
+        0.0, ge=0, description="time a question stops progress (s): costs this share of the best move's gain"
+    )
     repeated_question: float = Field(-100.0, le=0)
     goal: float = Field(100.0, ge=0, description="reward for reaching the desired pose")
     goal_translation_m: float = Field(0.01, gt=0)

@@ -54,10 +54,9 @@ def answers(prob: Problem, b: np.ndarray, q: int):
 
 
 def question_value(prob: Problem, b: np.ndarray, q: int, asked: frozenset[int], depth: int) -> float:
-    cfg = prob.cfg.reward
     p_yes, b_yes, b_no = answers(prob, b, q)
     asked = asked | {q}
-    return cfg.question + cfg.gamma * (
+    return prob.q_reward + prob.cfg.reward.gamma * (
         p_yes * reference_value(prob, b_yes, asked, depth - 1)
         + (1.0 - p_yes) * reference_value(prob, b_no, asked, depth - 1)
     )
@@ -388,3 +387,21 @@ def test_upper_bounds_dominate_every_achievable_reward(seed):
         b = rng.dirichlet(np.full(len(snap.goals), float(rng.choice([0.1, 1.0]))))
         # the linear bound dominates the optimal value of any belief
         assert float(b @ prob.U) >= reference_value(prob, b, frozenset(), cfg.planner.max_questions) - 1e-9
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_question_time_cost_is_the_forgone_share_of_the_best_moves_gain(seed):
+    cfg, snap = random_problem(seed)
+    base = Problem(SharedAutonomyModel(cfg), snap)
+    timed_cfg = config_from_dict({**cfg.model_dump(mode="json"), "reward": {
+        **cfg.model_dump(mode="json")["reward"], "question_time_s": 0.75}})
+    timed = Problem(SharedAutonomyModel(timed_cfg), snap)
+    assert base.q_reward == cfg.reward.question  # 0 s: the paper's fixed question reward
+    if not base.moves:
+        assert timed.q_reward == base.q_reward
+        return
+    stay = base._rewards_at(snap.pose.position[None], snap.pose.quat_wxyz[None])[0]
+    gain = max(0.0, float(base.move_values(snap.probs)[0] - snap.probs @ stay))
+    assert timed.q_reward == pytest.approx(cfg.reward.question - gain * 0.75 / (base.H * base.dt))
+    # The solver stays exact with the extra (constant) cost.
+    assert Solver(SharedAutonomyModel(timed_cfg)).plan(snap).value == pytest.approx(reference_optimum(timed), abs=1e-6)

@@ -48,6 +48,7 @@ class Problem:
         self.q_reward = cfg.reward.question
         # M[g, a]: reward of move a if the goal is g.
         self.M = self._move_rewards() if self.moves else np.zeros((len(goals), 0))
+        self.q_reward = self.q_reward - self._question_time_cost()
         # L_yes[q, g] = P(yes | g, question q).
         p = cfg.intent.answer_p_correct
         qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
@@ -97,6 +98,19 @@ class Problem:
         if cfg.reward.discount_lookahead:
             rewards = rewards * self.gamma**self.H  # received when the pose is reached
         return rewards.T
+
+    def _question_time_cost(self) -> float:
+        """Progress a question forgoes (reward units, >= 0): while it is asked and answered
+        (``question_time_s``) nothing moves, so it costs that share of the lookahead window's gain of the
+        best move over staying put, at the planning-time belief. Constant per snapshot, so the solver's
+        bounds (which need ``r_q`` to be one number) stay valid; 0 with ``question_time_s = 0``."""
+        t_q = self.cfg.reward.question_time_s
+        if t_q <= 0.0 or not self.moves:
+            return 0.0
+        pose = self.snap.pose
+        stay = self._rewards_at(pose.position[None, :], pose.quat_wxyz[None, :])[0]
+        gain = float(self.move_values(self.b0)[0] - self.b0 @ stay)
+        return max(0.0, gain) * t_q / (self.H * self.dt)
 
     def move_values(self, beliefs: FloatArray) -> FloatArray:
         """Value of the best move for each belief ``(n, G)``: ``(n,)`` (``-inf`` with no move)."""
