@@ -534,7 +534,7 @@ class Daemon:
 
     def _belief_list(self) -> list[dict[str, Any]]:
         tp = self.belief.target_probabilities()
-        return [{"goal": g, "p": round(float(p), 6)} for g, p in tp.items()]
+        return [{"goal": g, "p": float(p)} for g, p in tp.items()]  # unrounded: sums to 1 within 1e-12
 
     def _action_dict(self, action: Action) -> dict[str, Any]:
         d: dict[str, Any] = {"kind": action.kind.value}
