@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -83,6 +83,10 @@ class Arm(abc.ABC):
 
     #: ``True`` for arms that move in real time by themselves (the real xArm); simulated arms are stepped.
     realtime: bool = False
+
+    def status(self) -> dict[str, Any]:
+        """Driver diagnostics for the ``status`` command (connection, fault code, counters)."""
+        return {}
 
     def reset_fault(self) -> None:  # noqa: B027 - simulated arms have no faults to clear
         """Clear a latched fault and re-enable motion; called only on an explicit ``resume``."""

@@ -282,6 +282,7 @@ class Daemon:
             "method": self.method,
             "arm": self.arm.name if self.arm is not None else self.opts.arm,
             "arm_fault": self.arm_state.fault if self.arm_state is not None else None,
+            "arm_status": self.arm.status() if self.arm is not None else {},
             "input": self.opts.input,
             "input_connected": self.input_connected,
             "planner": self._planner_dict(),
