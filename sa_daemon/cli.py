@@ -35,7 +35,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     methods = args.method or list(METHODS)
     specs = [TrialSpec(_scene_arg(args), t, m, s) for t in tasks for m in methods for s in range(args.seeds)]
     plots = Path(args.plots) if args.plots else None
-    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots)
+    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots, arm=args.arm)
     summary = summarise(trials)
     print(format_summary(summary))
     if plots is not None:
@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", help="write trials and summary to this file")
     e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
     e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    e.add_argument("--arm", choices=["kinematic"], default="kinematic")
+    e.add_argument("--arm", choices=["kinematic", "mujoco"], default="kinematic",
+                   help="kinematic: exact twist integration; mujoco: physics, success also needs a lift")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_eval)
 

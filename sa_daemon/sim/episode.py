@@ -5,17 +5,20 @@ what it sees, the belief takes the joystick sample, every ``planner.period_s`` t
 (deterministically: it stops at ``eval.node_budget`` belief evaluations, never at a clock), the model turns
 the action into a blended twist and the arm moves. A question stops the robot until the user answers.
 The trial ends when the user closes the gripper (success if it is at its desired pose, a pose of the
-task's goal) or at ``sim_user.timeout_s``.
+task's goal) or at ``sim_user.timeout_s``. An arm with a physical check (``lift_test``, the MuJoCo arm)
+must also lift the task's object after closing for the trial to succeed.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import numpy as np
 
 from ..arm.base import Arm
+from ..arm.factory import make_arm
 from ..arm.kinematic import KinematicArm
 from ..config import Config
 from ..geometry import Pose
@@ -33,6 +36,11 @@ ArmFactory = Callable[[Scene, Config], Arm]
 
 def kinematic_arm(scene: Scene, cfg: Config) -> Arm:
     return KinematicArm(scene.start, cfg.limits)
+
+
+def arm_factory(backend: str) -> ArmFactory:
+    """A picklable factory of ``backend`` arms (``kinematic``, ``mujoco``), see ``arm.factory.make_arm``."""
+    return kinematic_arm if backend == "kinematic" else partial(make_arm, backend)
 
 
 @dataclass
@@ -169,6 +177,10 @@ def run_trial(
     elapsed = len(axes) * dt
     final_p = belief.target_probabilities()[task]
     success = closed and user.at_goal(arm.read().pose)
+    lift_test = getattr(arm, "lift_test", None)
+    if success and callable(lift_test):
+        success = lift_test() == goal.object  # physics: the gripper must hold the task's object
+    arm.close()
     return TrialResult(
         scene=scene.name,
         task=task,

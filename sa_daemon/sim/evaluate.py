@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from ..config import Config
 from ..planner.scene import load_scene
-from .episode import run_trial
+from .episode import arm_factory, run_trial
 
 SUCCESS_METRICS = ("completion_time_s", "mode_changes", "joystick_input", "opposing_pct")
 
@@ -38,10 +38,12 @@ def timeline_path(plots: Path, spec: TrialSpec, scene_name: str) -> Path:
     return plots / f"{safe.replace('+', '_')}.png"
 
 
-def _run(args: tuple[TrialSpec, Config, Path | None]) -> dict:
-    spec, cfg, plots = args
+def _run(args: tuple[TrialSpec, Config, Path | None, str]) -> dict:
+    spec, cfg, plots, arm = args
     scene = load_scene(spec.scene)
-    result = run_trial(scene, spec.task, spec.method, spec.seed, cfg, record=plots is not None)
+    result = run_trial(
+        scene, spec.task, spec.method, spec.seed, cfg, arm_factory=arm_factory(arm), record=plots is not None
+    )
     if plots is not None:
         from .plots import plot_timeline
 
@@ -50,13 +52,15 @@ def _run(args: tuple[TrialSpec, Config, Path | None]) -> dict:
 
 
 def run_trials(
-    specs: list[TrialSpec], cfg: Config, jobs: int = 1, progress: bool = True, plots: Path | None = None
+    specs: list[TrialSpec], cfg: Config, jobs: int = 1, progress: bool = True, plots: Path | None = None,
+    arm: str = "kinematic",
 ) -> list[dict]:
     """Run ``specs`` (in ``jobs`` spawned processes when > 1); results in the order of ``specs``.
 
-    With ``plots`` every trial also writes its Fig. 4 timeline there.
+    With ``plots`` every trial also writes its Fig. 4 timeline there. ``arm`` names the arm backend
+    (``kinematic`` or ``mujoco``; a name, so the work items pickle for the spawn pool).
     """
-    work = [(s, cfg, plots) for s in specs]
+    work = [(s, cfg, plots, arm) for s in specs]
     bar = tqdm(total=len(work), desc="trials", unit="trial", file=sys.stderr, disable=not progress)
     out: list[dict] = []
     if jobs <= 1:

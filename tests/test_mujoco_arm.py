@@ -1,0 +1,241 @@
+"""The MuJoCo xArm-6: real physics for start pose, twist tracking, refusals, the gripper, a whole trial."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+import time
+
+import mujoco
+import numpy as np
+import pytest
+
+from sa_daemon.arm.base import Arm, ArmState
+from sa_daemon.arm.factory import make_arm
+from sa_daemon.arm.kinematics import ArmKinematics
+from sa_daemon.arm.mujoco_arm import MujocoArm
+from sa_daemon.config import Config
+from sa_daemon.planner.scene import load_scene
+from sa_daemon.sim.episode import arm_factory, run_trial
+
+
+@pytest.fixture(scope="module")
+def scene1():
+    return load_scene("scene1")
+
+
+@pytest.fixture
+def arm(scene1):
+    a = MujocoArm(scene1, Config())
+    yield a
+    a.close()
+
+
+def _hold(arm: MujocoArm, twist, seconds: float, dt: float = 0.01) -> None:
+    arm.command_twist(np.asarray(twist, dtype=float))
+    for _ in range(round(seconds / dt)):
+        arm.step(dt)
+
+
+# -- construction --------------------------------------------------------------------------------------
+
+
+def test_start_pose_matches_scene_start_within_1_mm(arm, scene1):
+    s = arm.read()
+    assert isinstance(arm, Arm) and arm.name == "mujoco" and isinstance(s, ArmState)
+    d_t, d_r = s.pose.distance(scene1.start)
+    assert d_t < 1e-3 and d_r < 1e-3
+    assert s.gripper_closed is False and s.fault is None
+    assert s.joints is not None and s.joints.shape == (6,)
+    assert isinstance(arm.kinematics, ArmKinematics)
+    np.testing.assert_allclose(arm.fingers, [0.0425, 0.0425], atol=1e-9)
+
+
+def test_status_reports_simulation_diagnostics(arm):
+    st = arm.status()
+    assert st["sim_time_s"] == 0.0 and st["fingers_m"] == [0.0425, 0.0425] and st["viewer"] is False
+    json.dumps(st)
+
+
+def test_holding_still_keeps_the_start_pose(arm, scene1):
+    arm.step(0.5)
+    d_t, d_r = arm.read().pose.distance(scene1.start)
+    assert d_t < 1e-3 and d_r < 1e-3
+
+
+def test_pinocchio_and_mujoco_agree_on_the_tcp(arm):
+    # One MJCF, two engines: the Pinocchio frame and the MuJoCo site coincide at random joints.
+    d = mujoco.MjData(arm.model)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = rng.uniform(arm.kinematics.lower, arm.kinematics.upper)
+        d.qpos[:6] = q
+        mujoco.mj_kinematics(arm.model, d)
+        pose = arm.kinematics.fk(q)
+        np.testing.assert_allclose(d.site("tcp").xpos, pose.position, atol=1e-9)
+        np.testing.assert_allclose(d.site("tcp").xmat.reshape(3, 3), pose.rotation, atol=1e-9)
+
+
+def test_factory_builds_the_mujoco_arm(scene1):
+    a = make_arm("mujoco", scene1, Config())
+    assert isinstance(a, MujocoArm)
+    a.close()
+    a.close()  # idempotent
+
+
+# -- twist tracking ------------------------------------------------------------------------------------
+
+
+def test_held_linear_twist_moves_5_cm_in_1_s_with_small_orientation_drift(arm):
+    p0 = arm.read().pose
+    t0 = time.perf_counter()
+    _hold(arm, [0.05, 0, 0, 0, 0, 0], 1.0)
+    us_per_step = (time.perf_counter() - t0) / 100 * 1e6
+    p1 = arm.read().pose
+    moved = p1.position - p0.position
+    assert moved[0] == pytest.approx(0.05, abs=1e-3)
+    assert np.max(np.abs(moved[1:])) < 1e-3
+    assert p1.distance(p0)[1] < 0.005  # rad
+    assert us_per_step < 5000  # at least twice faster than real time, even on a slow machine
+
+
+def test_rotation_twist_rotates_about_the_tcp(arm):
+    p0 = arm.read().pose
+    _hold(arm, [0, 0, 0, 0, 0, 0.3], 1.0)
+    p1 = arm.read().pose
+    d_t, d_r = p1.distance(p0)
+    assert d_r == pytest.approx(0.3, abs=0.01)
+    assert d_t < 2e-3
+    # about base z: the tool z axis keeps its height component
+    assert p1.rotation[2, 2] == pytest.approx(p0.rotation[2, 2], abs=1e-3)
+
+
+def test_twist_is_limited_per_axis(arm):
+    p0 = arm.read().pose
+    _hold(arm, [1.0, 0, 0, 0, 0, 0], 0.2)  # 4 x the 0.25 m/s limit
+    assert arm.read().pose.position[0] - p0.position[0] == pytest.approx(0.05, abs=2e-3)
+
+
+def test_a_bad_twist_raises_and_changes_nothing(arm):
+    arm.command_twist(np.zeros(6))
+    p0 = arm.read().pose
+    for bad in ([0.0, 0.0, float("nan"), 0.0, 0.0, 0.0], [0.0, float("inf"), 0, 0, 0, 0], [0.1, 0.0, 0.0]):
+        with pytest.raises(ValueError):
+            arm.command_twist(bad)
+    arm.step(0.2)
+    assert arm.read().pose.distance(p0)[0] < 1e-5
+
+
+def test_step_keeps_simulated_time_on_the_callers_clock(arm):
+    t0 = arm.time
+    for _ in range(40):
+        arm.step(0.025)  # not a multiple of the 2 ms physics step
+    assert arm.time - t0 == pytest.approx(1.0, abs=0.001)
+    with pytest.raises(ValueError):
+        arm.step(float("nan"))
+
+
+# -- gripper -------------------------------------------------------------------------------------------
+
+
+def test_gripper_closes_on_the_cup_at_a_side_grasp_stops_the_arm_and_lifts_it(scene1):
+    cfg = Config()
+    goal = scene1.goal("cup:side")
+    arm = MujocoArm(scene1, cfg)
+    # The head-on poses (approach along base x) need joint 5 beyond its -1.69 rad bound; this one turns
+    # the approach 45 deg and closes across the cup's diameter.
+    arm.place(goal.poses[2])
+    arm.step(0.1)
+    p0 = arm.read().pose
+    arm.command_gripper(True)
+    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))  # ignored: a closed gripper stops the arm
+    arm.step(0.6)
+    assert arm.read().gripper_closed is True
+    fingers = arm.fingers
+    assert np.all(fingers < 0.0425 - 1e-3)  # moved in ...
+    assert np.all(fingers > 0.03)  # ... and stopped by the 0.08 m wide cup
+    assert arm.read().pose.distance(p0)[0] < 2e-3
+    assert arm.lift_test() == "cup"
+    arm.close()
+
+
+def test_closing_on_nothing_lifts_nothing(arm):
+    arm.command_gripper(True)
+    assert arm.lift_test() is None
+    assert np.all(arm.fingers < 1e-3)
+    arm.command_gripper(False)
+    arm.step(0.6)
+    assert np.all(arm.fingers > 0.04)
+
+
+# -- evaluation ----------------------------------------------------------------------------------------
+
+
+def test_manual_trial_on_mujoco_succeeds_with_a_physical_lift(scene1):
+    r = run_trial(scene1, "cup:top", "manual", 0, Config(), arm_factory=arm_factory("mujoco"))
+    assert r.success
+    assert 20.0 < r.completion_time_s < 80.0
+
+
+def test_cli_eval_accepts_the_mujoco_arm_in_a_spawn_pool(tmp_path):
+    out = tmp_path / "eval.json"
+    r = subprocess.run(
+        [sys.executable, "-m", "sa_daemon.cli", "eval", "--scene", "scene1", "--task", "cup:top", "--method",
+         "policy", "--seeds", "2", "--jobs", "2", "--arm", "mujoco", "--quiet", "--json", str(out)],
+        check=False, capture_output=True, text=True, timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    assert data["meta"]["arm"] == "mujoco"
+    assert [t["success"] for t in data["trials"]] == [True, True]
+
+
+# -- viewing -------------------------------------------------------------------------------------------
+
+
+def test_viewer_without_a_display_warns_and_runs_headless(scene1, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.warns(RuntimeWarning, match="no display"):
+        a = MujocoArm(scene1, Config(), viewer=True)
+    a.step(0.01)
+    a.close()
+
+
+def test_offscreen_render_writes_png_frames(tmp_path):
+    # A fresh process: the GL backend is chosen when mujoco is first imported.
+    code = textwrap.dedent(f"""
+        from sa_daemon.arm.mujoco_arm import MujocoArm
+        from sa_daemon.arm.mujoco_render import read_png_size
+        from sa_daemon.planner.scene import load_scene
+        arm = MujocoArm(load_scene("scene1"))
+        try:
+            a = arm.render({str(tmp_path / "one.png")!r}, 320, 240)
+            arm.step(0.05)
+            b = arm.render({str(tmp_path / "frames")!r}, 160, 120)
+            c = arm.render({str(tmp_path / "frames")!r}, 160, 120)
+        except RuntimeError as e:
+            print("SKIP", e)
+            raise SystemExit(0)
+        print(read_png_size(a), read_png_size(b), c.name)
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    r = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=60, env=env)
+    assert r.returncode == 0, r.stderr
+    if r.stdout.startswith("SKIP"):
+        pytest.skip(f"no offscreen OpenGL here (tried MUJOCO_GL={env.get('MUJOCO_GL', 'egl')}): {r.stdout[5:]}")
+    assert r.stdout.split() == ["(320,", "240)", "(160,", "120)", "frame_00001.png"]
+    assert (tmp_path / "frames" / "frame_00000.png").stat().st_size > 1000
+
+
+def test_scene_objects_are_free_bodies_resting_on_the_table(arm, scene1):
+    assert arm.world.object_names == tuple(o.name for o in scene1.objects)
+    assert math.isclose(arm.time, 0.0)
+    arm.step(0.5)
+    for obj, body in zip(scene1.objects, arm.world.object_bodies):
+        assert arm.model.body_jntnum[body] == 1  # one free joint
+        np.testing.assert_allclose(arm.data.xpos[body], obj.position, atol=1e-3)
