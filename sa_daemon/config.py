@@ -179,6 +179,9 @@ class SafetyConfig(_Section):
     angular_accel_radps2: float = Field(4.0, gt=0, description="per-axis angular acceleration limit (rad/s^2)")
     workspace_min_m: Vec3 = Field((-0.1, -0.6, 0.0), description="workspace box, lower corner (m, base frame)")
     workspace_max_m: Vec3 = Field((0.8, 0.6, 0.7), description="workspace box, upper corner (m, base frame)")
+    characteristic_length_m: float = Field(
+        0.3, gt=0, description="divides the Jacobian's linear rows so its condition number is unit-free (m)"
+    )
     singularity_slow: float = Field(17.0, gt=1, description="Jacobian condition number where slowing starts")
     singularity_stop: float = Field(30.0, gt=1, description="condition number where motion toward it stops")
     joint_margin_rad: float = Field(0.1, ge=0, description="halt a joint moving toward a bound within this (rad)")

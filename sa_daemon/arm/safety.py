@@ -12,6 +12,9 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
 7. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
 8. ``singularity_slow``/``singularity_halt`` - scale ``1 - (k - slow) / (stop - slow)`` when the
    Jacobian condition number ``k`` is above ``slow`` and the motion increases it; zero at ``stop``.
+   The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first: the condition
+   number of a mixed-unit Jacobian depends on the unit of length, and at the xArm-6's 0.3 m links this
+   makes a well-conditioned pose read about 15 (36 in raw metres at the scenes' start pose).
 9. ``joint_bound``   - a joint within ``joint_margin_rad`` of a bound and moving toward it halts the
    command (and a joint speed above its limit scales the command).
 
@@ -161,16 +164,23 @@ class SafetyPipeline:
             t[:3] = clipped
         return t
 
+    def _condition(self, q: FloatArray) -> float:
+        """Condition number of the length-normalised Jacobian at ``q`` (see stage 8)."""
+        assert self.kinematics is not None
+        jac = np.array(self.kinematics.jacobian(q), dtype=float)
+        jac[:3] /= self.cfg.characteristic_length_m
+        return float(np.linalg.cond(jac))
+
     def _joint_stages(self, t: FloatArray, q: FloatArray, codes: list[SafetyCode]) -> FloatArray:
         kin = self.kinematics
         assert kin is not None
         if not np.any(t):
             return t
         c = self.cfg
-        kappa = float(np.linalg.cond(kin.jacobian(q)))
+        kappa = self._condition(q)
         if kappa > c.singularity_slow:
             qdot = kin.joint_velocities(q, t)
-            ahead = float(np.linalg.cond(kin.jacobian(q + qdot * self.dt)))
+            ahead = self._condition(q + qdot * self.dt)
             if ahead > kappa:  # moving toward the singularity
                 if kappa >= c.singularity_stop:
                     codes.append(SafetyCode.SINGULARITY_HALT)

@@ -420,11 +420,14 @@ class Daemon:
         if self.question is not None and mono - self.question.asked_at >= self.cfg.sim_user.answer_delay_s:
             self.answer(sim.answer(self.question.target), source="sim")
         s = sim.sample(pose, listening=self.question is not None)
-        if s.close:
+        timed_out = self.now() - sim.task_started > self.cfg.sim_user.timeout_s
+        if s.close or timed_out:
             self.set_axes(np.zeros(3), mono)
-            self.set_gripper(True)
-            done = {"task": sim.task, "success": sim.at_goal(pose), "time_s": round(self.now() - sim.task_started, 3),
-                    "questions": len(self.asked)}
+            if s.close:
+                self.set_gripper(True)
+            done = {"task": sim.task, "success": bool(s.close and sim.at_goal(pose)),
+                    "time_s": round(self.now() - sim.task_started, 3), "questions": len(self.asked),
+                    "timed_out": timed_out and not s.close}
             self.tasks_done.append(done)
             self.event("task_done", **done)
             self._task_reset_at = mono + 1.0
