@@ -28,21 +28,20 @@ def override(cfg: Config, updates: dict[str, Any]) -> Config:
     return config_from_dict(data, "command line")
 
 
+#: ``run`` flags that override a config key when given.
+_FLAG_KEYS = {
+    "arm": "arm.backend",
+    "method": "method",
+    "pub": "zmq.pub",
+    "cmd": "zmq.cmd",
+    "record": "record.path",
+    "speech_wav": "speech.wav_dir",
+}
+
+
 def _run_config(args: argparse.Namespace) -> Config:
     cfg = load_config(args.config)
-    updates: dict[str, Any] = {}
-    if args.arm:
-        updates["arm.backend"] = args.arm
-    if args.method:
-        updates["method"] = args.method
-    if args.pub:
-        updates["zmq.pub"] = args.pub
-    if args.cmd:
-        updates["zmq.cmd"] = args.cmd
-    if args.record:
-        updates["record.path"] = args.record
-    if args.speech_wav:
-        updates["speech.wav_dir"] = args.speech_wav
+    updates: dict[str, Any] = {key: getattr(args, flag) for flag, key in _FLAG_KEYS.items() if getattr(args, flag)}
     if args.no_speech:
         updates["speech.enabled"] = False
     return override(cfg, updates) if updates else cfg
