@@ -95,9 +95,12 @@ class Recorder:
                 break
             if item is not None:
                 topic, t_ns, msg = item
-                data = json.dumps(msg, separators=(",", ":")).encode()
-                self._writer.add_message(self._channels[topic], log_time=t_ns, data=data, publish_time=t_ns)
-                self.written += 1
+                try:
+                    data = json.dumps(msg, separators=(",", ":")).encode()
+                    self._writer.add_message(self._channels[topic], log_time=t_ns, data=data, publish_time=t_ns)
+                    self.written += 1
+                except (TypeError, ValueError, KeyError):  # not JSON, or no such topic: lose this one only
+                    self.dropped += 1
             if time.monotonic() - last_flush >= self.flush_s:
                 self._writer.flush()
                 last_flush = time.monotonic()

@@ -42,22 +42,25 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
     from .solver import Solver
 
     solver = Solver(SharedAutonomyModel(config_from_dict(cfg_data, "planner worker")))
-    conn.send(("hello", os.getpid()))
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError):
-            return
-        if msg is None:
-            return
-        seq, snap = msg
-        t0 = time.perf_counter()
-        try:
-            result = solver.plan(snap)
-        except Exception as e:  # noqa: BLE001 - any failure is reported, the worker lives on
-            conn.send(("error", seq, f"{type(e).__name__}: {e}"))
-            continue
-        conn.send(("plan", seq, result, (time.perf_counter() - t0) * 1e3))
+    try:
+        conn.send(("hello", os.getpid()))
+        while True:
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError):
+                return
+            if msg is None:
+                return
+            seq, snap = msg
+            t0 = time.perf_counter()
+            try:
+                result = solver.plan(snap)
+            except Exception as e:  # noqa: BLE001 - any failure is reported, the worker lives on
+                conn.send(("error", seq, f"{type(e).__name__}: {e}"))
+                continue
+            conn.send(("plan", seq, result, (time.perf_counter() - t0) * 1e3))
+    except OSError:  # BrokenPipeError: the daemon stopped or replaced us meanwhile
+        return
 
 
 @dataclass
@@ -152,11 +155,12 @@ class PlannerWorker:
         if not self.ready or self.in_flight is not None or self._conn is None:
             return False
         self._seq += 1
+        sent = time.monotonic()  # before the write: the woken worker may run before we get the CPU back
         try:
             self._conn.send((self._seq, snap))
         except (OSError, BrokenPipeError):
             return False
-        self.in_flight = (self._seq, time.monotonic())
+        self.in_flight = (self._seq, sent)
         return True
 
     def _readable(self) -> None:

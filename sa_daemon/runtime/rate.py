@@ -53,7 +53,8 @@ class PeriodStats:
         """``rate_hz``, period error percentiles (ms) and the overrun fraction."""
         p = np.asarray(self.periods_s[-self.keep :])
         if p.size == 0:
-            return {"rate_hz": 0.0, "period_err_ms_p50": 0.0, "period_err_ms_p99": 0.0, "overrun_fraction": 0.0}
+            return {"rate_hz": 0.0, "period_err_ms_p50": 0.0, "period_err_ms_p99": 0.0, "period_err_ms_max": 0.0,
+                    "overrun_fraction": 0.0, "skipped": float(self.skipped)}
         err = np.abs(p - self.nominal_s) * 1e3
         return {
             "rate_hz": float(1.0 / p.mean()),

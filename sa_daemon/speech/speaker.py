@@ -159,6 +159,9 @@ class Speaker:
 
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop the thread after the current utterance (a hung engine is abandoned: daemon thread)."""
+        with contextlib.suppress(queue.Empty):  # drop what is still queued, so the stop always fits
+            while True:
+                self._q.get_nowait()
         with contextlib.suppress(queue.Full):
             self._q.put_nowait(None)
         self._thread.join(timeout_s)
