@@ -104,7 +104,19 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scenes", help="list the built-in scenes and their goals")
     s.set_defaults(func=cmd_scenes)
     verbs.add_parsers(sub)
+    _config_after_verb(sub)
     return p
+
+
+def _config_after_verb(sub: argparse._SubParsersAction) -> None:
+    """Accept ``--config`` after the verb too (``sa-daemon run --config c.toml``); SUPPRESS keeps a
+    value given before the verb when it is not repeated."""
+    for parser in sub.choices.values():
+        nested = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if nested:
+            _config_after_verb(nested[0])
+        else:
+            parser.add_argument("--config", default=argparse.SUPPRESS, help="config.toml (default: built-in defaults)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -579,8 +579,6 @@ def test_bad_config_file_exits_2_naming_the_key(tmp_path):
     assert "runtime.publish_hzz" in r.stderr and "unknown key" in r.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="`--config` is only accepted before the verb: `sa-daemon run --config X` "
-                   "fails in argparse ('unrecognized arguments'), without naming the bad key (cli.py/verbs.py)")
 def test_bad_config_file_after_the_verb_exits_2_naming_the_key(tmp_path):
     args = _run_args(tmp_path)
     r = subprocess.run([*CLI, args[0], "--config", str(_bad_config(tmp_path)), *args[1:]],

@@ -81,7 +81,9 @@ class ZmqServer:
                 pass  # the client went away
             await asyncio.sleep(0)
 
-    def close(self) -> None:
-        for s in (self.pub, self.cmd):
-            s.close(linger=0)
+    def close(self, linger_s: float = 0.2) -> None:
+        """Close both sockets; the PUB socket gets ``linger_s`` to deliver the last events (a stuck
+        subscriber cannot hold the shutdown longer than that)."""
+        self.pub.close(linger=int(linger_s * 1000))
+        self.cmd.close(linger=0)
         self.ctx.term()

@@ -122,6 +122,7 @@ class Daemon:
         self._stop_event: asyncio.Event | None = None
         self._exit_code = 0
         self._last_watchdog = 0.0
+        self._ready_sent = False  # WATCHDOG=1 only after READY=1
         self._heartbeat: dict[str, float] = {}
         self.sim: SimInput | None = None
         self.joystick: Any = None
@@ -527,7 +528,7 @@ class Daemon:
 
     def _watchdog(self, mono: float) -> None:
         n = self.notifier
-        if n.watchdog_interval_s is None or mono - self._last_watchdog < min(n.watchdog_interval_s, 1.0):
+        if not self._ready_sent or n.watchdog_interval_s is None or mono - self._last_watchdog < min(n.watchdog_interval_s, 1.0):
             return
         # Healthy: every loop ticked within the last second (a stuck loop starves the watchdog).
         if all(mono - self._heartbeat.get(k, 0.0) < 1.0 for k in ("control", "belief", "planner", "publish")):
@@ -646,6 +647,7 @@ class Daemon:
             # collection never has to walk it during a control tick.
             gc.collect()
             gc.freeze()
+            self._ready_sent = True
             self.notifier.notify("READY=1", f"STATUS=running {opts.arm} arm, {opts.input} input, {self.method}")
             self.event("ready", arm=self.arm.name if self.arm else opts.arm, input=opts.input, method=self.method,
                        scene=opts.scene.name,

@@ -54,6 +54,8 @@ def build_daemon(args: argparse.Namespace) -> Any:
     cfg = _run_config(args)
     scene = load_scene(args.scene_file or args.scene or DEFAULT_SCENE)
     tasks = args.task or ([DEFAULT_TASK] if DEFAULT_TASK in scene.targets else scene.targets[:1])
+    for t in tasks:
+        scene.goal(t)  # an unknown task is refused before anything starts (KeyError naming it)
     opts = RunOptions(
         scene=scene, arm=cfg.arm.backend, input=args.input, tasks=tasks, method=cfg.method,
         pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=args.duration, record=cfg.record.path or None,
