@@ -51,7 +51,7 @@ from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
 from ..speech.speaker import Speaker, Spoken, question_text
-from .rate import FixedRate
+from .rate import FixedRate, PeriodStats
 from .siminput import SimInput
 
 log = logging.getLogger("sa_daemon")
@@ -647,6 +647,10 @@ class Daemon:
             # collection never has to walk it during a control tick.
             gc.collect()
             gc.freeze()
+            for r in self.rates.values():  # loop figures are of the running daemon, not its start-up
+                r.stats = PeriodStats(r.period_s)
+            self.latency_ms.clear()
+            self.tick_work_ms.clear()
             self._ready_sent = True
             self.notifier.notify("READY=1", f"STATUS=running {opts.arm} arm, {opts.input} input, {self.method}")
             self.event("ready", arm=self.arm.name if self.arm else opts.arm, input=opts.input, method=self.method,
@@ -671,12 +675,16 @@ class Daemon:
         cfg, opts = self.cfg, self.opts
         self.arm = self._arm_factory()
         self.arm_state = self.arm.read()
-        control = FixedRate(cfg.runtime.control_hz)
+        # One epoch for every loop; the others are phased between control ticks (a quarter and a half
+        # period after one) so their work does not delay a control tick.
+        t0 = time.monotonic() + 0.05
+        ctl = 1.0 / cfg.runtime.control_hz
+        control = FixedRate(cfg.runtime.control_hz, spin_s=5e-4, start=t0)
         self.rates = {
             "control": control,
-            "belief": FixedRate(cfg.runtime.belief_hz, spin_s=0.0),
-            "planner": FixedRate(1.0 / cfg.planner.period_s, spin_s=0.0),
-            "publish": FixedRate(cfg.runtime.publish_hz, spin_s=0.0),
+            "belief": FixedRate(cfg.runtime.belief_hz, spin_s=0.0, start=t0 + 0.25 * ctl),
+            "planner": FixedRate(1.0 / cfg.planner.period_s, spin_s=0.0, start=t0 + 0.5 * ctl),
+            "publish": FixedRate(cfg.runtime.publish_hz, spin_s=0.0, start=t0 + 0.6 * ctl),
         }
         self.safety = SafetyPipeline(cfg.safety, cfg.limits, control.dt, self.arm.kinematics)
         self.server = ZmqServer(opts.pub, opts.cmd, cfg.zmq.max_request_bytes, cfg.zmq.max_json_depth)

@@ -73,13 +73,16 @@ class FixedRate:
     slot (``skipped`` counts the lost ticks), so a stall never causes a burst of catch-up ticks.
     """
 
-    def __init__(self, hz: float, spin_s: float = 2e-4) -> None:
+    def __init__(self, hz: float, spin_s: float = 2e-4, start: float | None = None) -> None:
+        """``start`` (``time.monotonic`` s) places the grid: loops given starts a few ms apart never
+        fall due together, so a tick's work never delays another loop's tick (default: the first
+        call to :meth:`tick`)."""
         if not hz > 0:
             raise ValueError("rate must be positive (Hz)")
         self.period_s = 1.0 / hz
         self.spin_s = spin_s
         self.stats = PeriodStats(self.period_s)
-        self._next: float | None = None
+        self._next: float | None = None if start is None else start - self.period_s
         self._last: float | None = None
 
     @property
