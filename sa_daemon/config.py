@@ -169,6 +169,7 @@ class RuntimeConfig(_Section):
     question_timeout_s: float = Field(20.0, gt=0, description="an unanswered question is dropped after this (s)")
     worker_hang_s: float = Field(1.0, gt=0, description="a planner silent this long past its deadline is killed (s)")
     worker_start_timeout_s: float = Field(30.0, gt=0, description="time a new planner worker has to come up (s)")
+    worker_nice: int = Field(5, ge=0, le=19, description="niceness added to the planner worker (lower priority)")
 
 
 class SafetyConfig(_Section):

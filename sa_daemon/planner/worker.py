@@ -41,7 +41,14 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
     from .model import SharedAutonomyModel
     from .solver import Solver
 
-    solver = Solver(SharedAutonomyModel(config_from_dict(cfg_data, "planner worker")))
+    cfg = config_from_dict(cfg_data, "planner worker")
+    # Below the daemon's priority: when both share a core, the scheduler lets the control loop run
+    # first (the planner is anytime and has a deadline anyway).
+    try:
+        os.nice(cfg.runtime.worker_nice)
+    except OSError:
+        pass
+    solver = Solver(SharedAutonomyModel(cfg))
     try:
         conn.send(("hello", os.getpid()))
         while True:
