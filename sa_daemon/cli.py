@@ -24,7 +24,13 @@ def _add_scene(p: argparse.ArgumentParser, required: bool = True) -> None:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from .sim.evaluate import TrialSpec, format_summary, run_trials, summarise, write_results
+    from .sim.evaluate import (
+        TrialSpec,
+        format_summary,
+        run_trials,
+        summarise,
+        write_results,
+    )
 
     cfg = load_config(args.config)
     scene = load_scene(_scene_arg(args))

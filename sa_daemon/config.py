@@ -188,7 +188,7 @@ class SafetyConfig(_Section):
     joint_margin_rad: float = Field(0.1, ge=0, description="halt a joint moving toward a bound within this (rad)")
 
     @model_validator(mode="after")
-    def _check(self) -> "SafetyConfig":
+    def _check(self) -> SafetyConfig:
         if any(lo >= hi for lo, hi in zip(self.workspace_min_m, self.workspace_max_m)):
             raise ValueError("workspace_min_m must be below workspace_max_m on every axis")
         if self.singularity_stop <= self.singularity_slow:
@@ -299,7 +299,7 @@ class Config(_Section):
     record: RecordConfig = RecordConfig()
 
     @model_validator(mode="after")
-    def _check_method(self) -> "Config":
+    def _check_method(self) -> Config:
         if self.method not in METHODS:
             raise ValueError(f"method: unknown method {self.method!r} (one of {', '.join(METHODS)})")
         return self

@@ -15,8 +15,8 @@ every goal in one numpy call; :class:`Pose` wraps one pose for the rest of the c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -183,12 +183,12 @@ class Pose:
         object.__setattr__(self, "quat_wxyz", q)
 
     @classmethod
-    def from_rpy(cls, position: Sequence[float], rpy: Sequence[float]) -> "Pose":
+    def from_rpy(cls, position: Sequence[float], rpy: Sequence[float]) -> Pose:
         """Pose from position (m) and extrinsic roll-pitch-yaw (rad)."""
         return cls(np.asarray(position, dtype=float), rpy_to_quat(rpy))
 
     @classmethod
-    def from_matrix(cls, position: Sequence[float], rotation: ArrayLike) -> "Pose":
+    def from_matrix(cls, position: Sequence[float], rotation: ArrayLike) -> Pose:
         """Pose from position (m) and a 3x3 rotation matrix whose columns are the frame's axes."""
         return cls(np.asarray(position, dtype=float), matrix_to_quat(rotation))
 
@@ -197,7 +197,7 @@ class Pose:
         """3x3 rotation matrix; its columns are the tool x, y, z axes in the base frame."""
         return quat_to_matrix(self.quat_wxyz)
 
-    def moved(self, twist: ArrayLike, dt: float) -> "Pose":
+    def moved(self, twist: ArrayLike, dt: float) -> Pose:
         """This pose after applying a base-frame ``twist`` (m/s, rad/s) for ``dt`` s."""
         twist = np.asarray(twist, dtype=float)
         if twist.shape != (6,) or not np.all(np.isfinite(twist)):
@@ -205,7 +205,7 @@ class Pose:
         p, q = integrate_pose(self.position, self.quat_wxyz, twist, dt)
         return Pose(p, q)
 
-    def distance(self, other: "Pose") -> tuple[float, float]:
+    def distance(self, other: Pose) -> tuple[float, float]:
         """(translation distance in m, rotation angle in rad) to ``other``."""
         return (
             float(np.linalg.norm(self.position - other.position)),
@@ -217,7 +217,7 @@ class Pose:
         return {"position": self.position.tolist(), "quat_wxyz": self.quat_wxyz.tolist()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Pose":
+    def from_dict(cls, d: dict) -> Pose:
         """Inverse of :meth:`as_dict`."""
         return cls(np.asarray(d["position"], dtype=float), np.asarray(d["quat_wxyz"], dtype=float))
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import BlendConfig, Config, HOConfig, IntentConfig, MoveConfig
-from sa_daemon.geometry import Pose, rotvec_to_quat, quat_mul
+from sa_daemon.geometry import Pose, quat_mul, rotvec_to_quat
 from sa_daemon.planner.actions import (
     HO_ACTION,
     NO_ASSIST,

@@ -487,11 +487,11 @@ def test_monitor_once_prints_belief_bars_and_the_action(ho):
     out = r.stdout
     assert "method=ho" in out and "belief:" in out
     for goal in SCENE1_TARGETS:
-        m = re.search(rf"^  {re.escape(goal)}\s+([#.]{{30}}) (\d\.\d{{3}})$", out, re.M)
+        m = re.search(rf"^  {re.escape(goal)}\s+([#.]{{30}}) (\d\.\d{{3}})$", out, re.MULTILINE)
         assert m, f"no belief bar for {goal}:\n{out}"
         assert abs(m.group(1).count("#") - float(m.group(2)) * 30) <= 1
-    assert re.search(r"^action:\s+ho$", out, re.M), out
-    assert re.search(r"^planner:\s+pid \d+\s+idle", out, re.M), out
+    assert re.search(r"^action:\s+ho$", out, re.MULTILINE), out
+    assert re.search(r"^planner:\s+pid \d+\s+idle", out, re.MULTILINE), out
     assert "question: -" in out
 
 

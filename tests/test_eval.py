@@ -12,7 +12,13 @@ from sa_daemon.arm.kinematic import KinematicArm
 from sa_daemon.config import Config, config_from_dict
 from sa_daemon.planner.scene import load_scene
 from sa_daemon.sim.episode import TrialResult, run_trial
-from sa_daemon.sim.evaluate import TrialSpec, format_summary, run_trials, summarise, write_results
+from sa_daemon.sim.evaluate import (
+    TrialSpec,
+    format_summary,
+    run_trials,
+    summarise,
+    write_results,
+)
 
 METRIC_KEYS = (
     "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes", "joystick_input",

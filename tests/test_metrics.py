@@ -8,8 +8,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sa_daemon.sim import metrics
-from sa_daemon.sim.metrics import PREDICTION_THRESHOLD, correct_prediction, joystick_input, mode_changes, opposing_pct
-
+from sa_daemon.sim.metrics import (
+    PREDICTION_THRESHOLD,
+    correct_prediction,
+    joystick_input,
+    mode_changes,
+    opposing_pct,
+)
 
 # -- joystick input ------------------------------------------------------------------------------------
 

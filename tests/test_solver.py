@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import Config, config_from_dict
-from sa_daemon.geometry import Pose, integrate_pose, quat_angle, quat_mul, rotvec_to_quat, rpy_to_quat
+from sa_daemon.geometry import (
+    Pose,
+    integrate_pose,
+    quat_angle,
+    quat_mul,
+    rotvec_to_quat,
+    rpy_to_quat,
+)
 from sa_daemon.planner.actions import ActionKind, blend, ho_twist, move_twist
 from sa_daemon.planner.goals import Goal, GraspType
 from sa_daemon.planner.goalset import GoalSet

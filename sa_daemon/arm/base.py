@@ -78,7 +78,7 @@ class Arm(abc.ABC):
     def command_gripper(self, closed: bool) -> None:
         """Close (``True``) or open the gripper."""
 
-    def step(self, dt: float) -> None:  # noqa: B027 - real arms move on their own
+    def step(self, dt: float) -> None:
         """Advance a simulated arm by ``dt`` s under the held command (no-op for a real arm)."""
 
     #: ``True`` for arms that move in real time by themselves (the real xArm); simulated arms are stepped.
@@ -88,8 +88,8 @@ class Arm(abc.ABC):
         """Driver diagnostics for the ``status`` command (connection, fault code, counters)."""
         return {}
 
-    def reset_fault(self) -> None:  # noqa: B027 - simulated arms have no faults to clear
+    def reset_fault(self) -> None:
         """Clear a latched fault and re-enable motion; called only on an explicit ``resume``."""
 
-    def close(self) -> None:  # noqa: B027 - most arms hold no resources
+    def close(self) -> None:
         """Stop the arm and release its resources (connections, threads, viewers). Idempotent."""

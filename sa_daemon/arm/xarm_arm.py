@@ -329,7 +329,7 @@ class XArm(Arm):
             self._started.set()
             if self._startup_error is None:
                 self._loop()
-        except Exception as e:  # noqa: BLE001 - a driver bug: stop commanding (the arm stops by itself) and say so
+        except Exception as e:
             log.exception("xArm I/O thread failed")
             with self._cv:
                 self._latch(f"xArm driver error: {type(e).__name__}: {e}")

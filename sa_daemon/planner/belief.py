@@ -76,13 +76,13 @@ class Belief:
         object.__setattr__(self, "log_p", lp)
 
     @classmethod
-    def uniform(cls, goals: GoalSet | tuple[Goal, ...] | list[Goal]) -> "Belief":
+    def uniform(cls, goals: GoalSet | tuple[Goal, ...] | list[Goal]) -> Belief:
         """Uniform prior over ``goals``."""
         gs = goals if isinstance(goals, GoalSet) else GoalSet(tuple(goals))
         return cls(gs, np.full(len(gs), -np.log(len(gs))))
 
     @classmethod
-    def from_probs(cls, goals: GoalSet, probs: FloatArray) -> "Belief":
+    def from_probs(cls, goals: GoalSet, probs: FloatArray) -> Belief:
         """Belief with the given probabilities (normalised; zeros allowed)."""
         p = _check_finite("probs", probs, (len(goals),))
         if np.any(p < 0) or p.sum() <= 0:
@@ -106,7 +106,7 @@ class Belief:
         """Probability of each high-level target: what users and metrics see."""
         return self.goals.target_probabilities(self.probs)
 
-    def _normalised(self, log_p: FloatArray, cap: float, confirmed: str | None = None) -> "Belief":
+    def _normalised(self, log_p: FloatArray, cap: float, confirmed: str | None = None) -> Belief:
         log_p = log_p - log_sum_exp(log_p)
         p = np.exp(log_p)
         if p.max() > cap:
@@ -114,7 +114,7 @@ class Belief:
                 log_p = np.log(cap_probabilities(p, cap))
         return Belief(self.goals, log_p, confirmed if confirmed is not None else self.confirmed)
 
-    def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> "Belief":
+    def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:
         """MaxEnt IOC update from one joystick sample: ``log b(g) -= Q_g(x, u) - V_g(x)``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
@@ -136,7 +136,7 @@ class Belief:
         p_yes = np.where(self.goals.target_mask(target), p_correct, 1.0 - p_correct)
         return p_yes if yes else 1.0 - p_yes
 
-    def after_answer(self, target: str, yes: bool, cfg: IntentConfig) -> "Belief":
+    def after_answer(self, target: str, yes: bool, cfg: IntentConfig) -> Belief:
         """Bayes update from a yes/no answer to "is ``target`` your goal?"."""
         if target not in self.goals.targets:
             raise ValueError(f"unknown target {target!r}")
@@ -167,7 +167,7 @@ class Belief:
         """``N_eff < |G| / 2`` and resampling would change the allocation of goals to targets."""
         return self.n_eff < len(self.goals) / 2 and self.copy_allocation() != self.current_allocation()
 
-    def resampled(self, pose: Pose, cfg: IntentConfig) -> "Belief":
+    def resampled(self, pose: Pose, cfg: IntentConfig) -> Belief:
         """Resample and redistribute grasp poses if :meth:`needs_resampling`, else return ``self``."""
         if not cfg.resample or not self.needs_resampling():
             return self

@@ -105,7 +105,7 @@ class Goal:
         """``k_c``: the grasp pose closest to the gripper ``pose`` (section III-A)."""
         return self.poses[int(np.argmin(self.pose_distances(pose, rotation_weight_m_per_rad)))]
 
-    def with_poses(self, poses: tuple[Pose, ...]) -> "Goal":
+    def with_poses(self, poses: tuple[Pose, ...]) -> Goal:
         """A copy of this high-level target owning only ``poses`` (used by redistribution)."""
         return Goal(self.object, self.grasp_type, poses)
 
@@ -118,7 +118,7 @@ class Goal:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Goal":
+    def from_dict(cls, d: dict) -> Goal:
         return cls(d["object"], GraspType(d["grasp_type"]), tuple(Pose.from_dict(p) for p in d["poses"]))
 
     def __repr__(self) -> str:

@@ -15,7 +15,7 @@ base x (``|y . e_y| >= |y . e_x|``), else *top_vertical*.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 

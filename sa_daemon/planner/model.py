@@ -17,7 +17,15 @@ import numpy as np
 
 from ..config import Config
 from ..geometry import FloatArray, Pose, quat_angle
-from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind, blend, ho_twist, move_twist
+from .actions import (
+    HO_ACTION,
+    NO_ASSIST,
+    Action,
+    ActionKind,
+    blend,
+    ho_twist,
+    move_twist,
+)
 from .belief import Belief
 from .goalset import GoalSet
 from .huber import goal_gradients

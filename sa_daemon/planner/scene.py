@@ -12,10 +12,11 @@ field, e.g. ``scene1.toml: objects[1] 'chips can': size: cylinder needs [radius,
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable, NoReturn
+from typing import Any, NoReturn
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 

@@ -61,7 +61,7 @@ class Snapshot:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Snapshot":
+    def from_dict(cls, d: dict) -> Snapshot:
         return cls(
             goals=GoalSet(tuple(Goal.from_dict(g) for g in d["goals"])),
             probs=np.asarray(d["probs"], dtype=float),

@@ -247,7 +247,7 @@ class Solver:
         ub = max(m0, prob.q_reward + prob.gamma * float(b0 @ prob.U)) if s.n_q else m0
         root_values: dict[Action, float] = {}
         try:
-            for depth in range(0, s.max_depth + 1):
+            for depth in range(s.max_depth + 1):
                 cuts = s.cuts
                 root: dict[int, float] = {}
                 try:

@@ -11,9 +11,9 @@ must also lift the task's object after closing for the trial to succeed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Callable
 
 import numpy as np
 

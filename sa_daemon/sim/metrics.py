@@ -6,7 +6,7 @@ and whether the robot's twist opposed the user's (section III-E rule) at that sa
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
