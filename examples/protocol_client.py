@@ -106,7 +106,23 @@ def _seconds_to_ms(timeout: float | None) -> int | None:
     return None if timeout is None else max(0, math.ceil(timeout * 1000.0))
 
 
-class Subscriber:
+class _SocketOwner:
+    """Closes its ``_socket`` on :meth:`close` and at the end of a ``with`` block."""
+
+    _socket: zmq.Socket
+
+    def close(self) -> None:
+        """Close the socket."""
+        self._socket.close(linger=0)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class Subscriber(_SocketOwner):
     """A ``SUB`` socket on the daemon's publisher.
 
     ``topics`` are ZeroMQ prefix subscriptions. ``event`` is subscribed before ``state`` on
@@ -200,18 +216,8 @@ class Subscriber:
             count += 1
         return count
 
-    def close(self) -> None:
-        """Close the socket."""
-        self._socket.close(linger=0)
 
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
-class CommandClient:
+class CommandClient(_SocketOwner):
     """A client of the daemon's command socket, as ``REQ`` (default) or ``DEALER``.
 
     :meth:`request` sends one request and returns the decoded reply. If no reply arrives within
@@ -302,16 +308,6 @@ class CommandClient:
     def set_method(self, method: str, timeout: float | None = None) -> dict[str, Any]:
         """``{"cmd": "set_method", "method": method}``."""
         return self.command("set_method", timeout, method=method)
-
-    def close(self) -> None:
-        """Close the socket."""
-        self._socket.close(linger=0)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def summarize_state(state: dict[str, Any]) -> str:

@@ -13,7 +13,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zmq
+from helpers import free_port, process_gone, wav_stats
 
 from sa_daemon.arm.safety import SafetyCode
 from sa_daemon.config import Config
@@ -40,30 +40,6 @@ STATE_KEYS = {
 }
 START_TIMEOUT_S = 60.0
 CLI = [sys.executable, "-m", "sa_daemon.cli"]
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _gone(pid: int) -> bool:
-    """The process has exited (no such pid, or a zombie nobody reaped yet)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
-    except FileNotFoundError:
-        return True
-
-
-def _wav_stats(path: str | Path) -> tuple[int, int, float, float]:
-    import wave
-
-    with wave.open(str(path), "rb") as w:
-        ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
-        x = np.frombuffer(w.readframes(n), dtype="<i2").astype(float)
-    return ch, width, n / rate, float(np.sqrt(np.mean(x**2))) if x.size else 0.0
 
 
 class Collector(threading.Thread):
@@ -148,8 +124,8 @@ class DaemonProc:
     def __init__(self, workdir: Path, *extra: str, config: str | None = None) -> None:
         self.dir = workdir
         workdir.mkdir(parents=True, exist_ok=True)
-        self.pub = f"tcp://127.0.0.1:{_free_port()}"
-        self.cmd = f"tcp://127.0.0.1:{_free_port()}"
+        self.pub = f"tcp://127.0.0.1:{free_port()}"
+        self.cmd = f"tcp://127.0.0.1:{free_port()}"
         self.collector = Collector(self.pub)
         self.collector.start()
         args = [*CLI]
@@ -346,7 +322,7 @@ def test_spoken_questions_leave_non_silent_wav_files(policy):
     assert sp["error"] is None and sp["played"] is False and sp["wav"]
     wav = Path(sp["wav"]) if Path(sp["wav"]).is_absolute() else policy.dir / sp["wav"]
     assert wav.parent == policy.dir / "wav" and wav.is_file()
-    ch, width, duration, rms = _wav_stats(wav)
+    ch, width, _, duration, rms = wav_stats(wav)
     assert (ch, width) == (1, 2) and duration > 0.5 and rms > 500.0
     assert not [m for m in c.slice(topic="event") if m["type"] == "speech_unavailable"]
 
@@ -433,7 +409,7 @@ def test_killed_planner_worker_is_replaced_within_2_s(policy):
     assert s1["planner"]["restarts"] == s0["planner"]["restarts"] + 1
     assert s1["planner"]["pid"] == ev["pid"]
     assert _max_gap(c.slice(i0, topic="state")) <= 1.0, "state messages paused"
-    assert _gone(old)
+    assert process_gone(old)
 
 
 def test_stopped_planner_worker_is_detected_as_hung_and_replaced(policy):
@@ -455,11 +431,11 @@ def test_stopped_planner_worker_is_detected_as_hung_and_replaced(policy):
                 timeout_s=START_TIMEOUT_S, start=ir, what="state with the new worker planning")
         assert _max_gap(c.slice(i0, topic="state")) <= 1.0, "state messages paused"
         end = time.monotonic() + 10
-        while not _gone(old):
+        while not process_gone(old):
             assert time.monotonic() < end, "the stopped worker was not killed"
             time.sleep(0.05)
     finally:
-        if not _gone(old):
+        if not process_gone(old):
             os.kill(old, signal.SIGCONT)
             os.kill(old, signal.SIGKILL)
 
@@ -475,7 +451,7 @@ def test_answer_without_a_pending_question_exits_1(ho):
 
 
 def test_answer_without_a_daemon_times_out_with_exit_2(tmp_path):
-    r = subprocess.run([*CLI, "answer", "no", "--cmd", f"tcp://127.0.0.1:{_free_port()}", "--timeout", "0.5"],
+    r = subprocess.run([*CLI, "answer", "no", "--cmd", f"tcp://127.0.0.1:{free_port()}", "--timeout", "0.5"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no reply" in r.stderr
 
@@ -511,7 +487,7 @@ def test_sigterm_stops_cleanly_and_leaves_a_plottable_recording(tmp_path):
         assert st["code"] == 0
     finally:
         d.close()
-    assert _gone(worker)
+    assert process_gone(worker)
     assert "sa-daemon: ran" in d.log and "recording in run.mcap" in d.log
     msgs = list(read_recording(tmp_path / "d" / "run.mcap"))
     states = [m for tp, _, m in msgs if tp == "/state"]
@@ -544,7 +520,7 @@ def test_sigkill_leaves_a_recording_readable_up_to_about_the_last_second(tmp_pat
         d.close()
     worker = last["planner"]["pid"]
     end = time.monotonic() + 10
-    while not _gone(worker):  # the orphaned worker sees its pipe close and exits
+    while not process_gone(worker):  # the orphaned worker sees its pipe close and exits
         assert time.monotonic() < end, "planner worker outlived the daemon"
         time.sleep(0.05)
     msgs = list(read_recording(tmp_path / "d" / "crash.mcap"))  # no footer: read to the last chunk
@@ -563,7 +539,7 @@ def test_sigkill_leaves_a_recording_readable_up_to_about_the_last_second(tmp_pat
 
 def _run_args(tmp_path: Path) -> list[str]:
     return ["run", "--duration", "5", "--no-speech", "--quiet",
-            "--pub", f"tcp://127.0.0.1:{_free_port()}", "--cmd", f"tcp://127.0.0.1:{_free_port()}"]
+            "--pub", f"tcp://127.0.0.1:{free_port()}", "--cmd", f"tcp://127.0.0.1:{free_port()}"]
 
 
 def _bad_config(tmp_path: Path) -> Path:

@@ -11,6 +11,7 @@ import time
 import uuid
 
 import pytest
+from helpers import free_port
 
 from sa_daemon.io.notify import Notifier
 
@@ -20,12 +21,6 @@ def _bind(addr: str) -> socket.socket:
     s.bind(addr)
     s.settimeout(5.0)
     return s
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_ready_datagram_on_a_path_socket(tmp_path):
@@ -122,7 +117,7 @@ def test_daemon_sends_ready_watchdog_and_stopping(tmp_path):
     args = [
         sys.executable, "-m", "sa_daemon.cli", "run", "--arm", "kinematic", "--input", "sim", "--scene", "scene1",
         "--task", "cup:top", "--duration", "6", "--no-speech", "--quiet",
-        "--pub", f"tcp://127.0.0.1:{_free_port()}", "--cmd", f"tcp://127.0.0.1:{_free_port()}",
+        "--pub", f"tcp://127.0.0.1:{free_port()}", "--cmd", f"tcp://127.0.0.1:{free_port()}",
     ]
     proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     got: list[tuple[float, bytes]] = []

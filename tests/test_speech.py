@@ -9,21 +9,11 @@ import time
 import wave
 from pathlib import Path
 
-import numpy as np
 import pytest
+from helpers import wav_stats
 
 from sa_daemon.config import SpeechConfig
 from sa_daemon.speech.speaker import Speaker, Spoken, question_text
-
-
-def wav_stats(path: str | Path) -> tuple[int, int, int, float, float]:
-    """(channels, sample width, rate, duration s, RMS of 16-bit samples)."""
-    with wave.open(str(path), "rb") as w:
-        ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
-        frames = w.readframes(n)
-    samples = np.frombuffer(frames, dtype="<i2").astype(float) if width == 2 else np.zeros(1)
-    rms = float(np.sqrt(np.mean(samples**2))) if samples.size else 0.0
-    return ch, width, rate, n / rate if rate else 0.0, rms
 
 
 @pytest.mark.parametrize(

@@ -10,6 +10,8 @@ import time
 import numpy as np
 import pytest
 
+from helpers import process_gone
+
 from sa_daemon.config import Config
 from sa_daemon.planner.actions import ActionKind, Mode
 from sa_daemon.planner.model import SharedAutonomyModel
@@ -25,15 +27,6 @@ def _snapshot(**kw) -> Snapshot:
     belief = SharedAutonomyModel(Config()).initial_belief(scene.goals)
     return Snapshot(belief.goals, belief.probs, scene.start, np.zeros(6), Mode.TRANSLATION, frozenset(), "policy",
                     budget_s=0.1, **kw)
-
-
-def _gone(pid: int) -> bool:
-    """The process has exited (no such pid, or a zombie nobody reaped yet)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
-    except FileNotFoundError:
-        return True
 
 
 class Harness:
@@ -111,7 +104,7 @@ async def test_restart_after_sigkill_gives_a_new_pid_that_answers(harness):
     await harness.ready()
     assert w.pid != old and w.alive
     assert isinstance(await harness.plan(_snapshot()), PlanReply)
-    assert _gone(old)
+    assert process_gone(old)
 
 
 async def test_a_stopped_worker_is_replaced_by_restart(harness):
@@ -126,7 +119,7 @@ async def test_a_stopped_worker_is_replaced_by_restart(harness):
         assert w.alive  # alive but silent: only the daemon's deadline can tell
         w.restart()  # SIGKILL works on a stopped process
         end = time.monotonic() + 10
-        while not _gone(old):
+        while not process_gone(old):
             assert time.monotonic() < end, "stopped worker was not killed"
             await asyncio.sleep(0.02)
         assert w.in_flight is None and w.pid != old
@@ -135,7 +128,7 @@ async def test_a_stopped_worker_is_replaced_by_restart(harness):
         assert isinstance(reply, PlanReply)
         assert harness.replies.empty()  # the old request's answer never arrives late
     finally:
-        if not _gone(old):
+        if not process_gone(old):
             os.kill(old, signal.SIGKILL)
 
 
@@ -147,7 +140,7 @@ async def test_stop_ends_the_process():
     h.worker.stop()
     assert not h.worker.alive
     end = time.monotonic() + 10
-    while not _gone(pid):
+    while not process_gone(pid):
         assert time.monotonic() < end
         await asyncio.sleep(0.02)
     assert h.exits == 0  # an orderly stop is not reported as a crash

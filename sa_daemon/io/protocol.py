@@ -32,23 +32,10 @@ class Request:
     args: dict[str, Any]
 
 
-def _depth(obj: Any, limit: int) -> int:
-    """Nesting depth of a decoded JSON value, iteratively (never recursion), stopping past ``limit``."""
-    deepest = 0
-    stack: list[tuple[Any, int]] = [(obj, 1)]
-    while stack:
-        o, d = stack.pop()
-        if isinstance(o, (dict, list)):
-            deepest = max(deepest, d)
-            if deepest > limit:
-                return deepest
-            stack.extend((v, d + 1) for v in (o.values() if isinstance(o, dict) else o))
-    return deepest
-
-
 def _bracket_depth(text: str) -> int:
-    """Upper bound of the nesting depth from the raw text, so a hostile document is refused before
-    ``json.loads`` recurses into it."""
+    """Nesting depth of a JSON text, counted on the raw text (brackets outside strings): a hostile
+    document is refused before ``json.loads`` recurses into it, and for any text ``json.loads``
+    accepts this is exactly the depth of the decoded value."""
     depth = peak = 0
     in_str = esc = False
     for ch in text:
@@ -85,8 +72,6 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
         raise
     except (ValueError, RecursionError) as e:
         raise RequestError(f"request is not valid JSON: {e}") from None
-    if _depth(obj, max_depth) > max_depth:
-        raise RequestError(f"request nested deeper than {max_depth} levels")
     if not isinstance(obj, dict):
         raise RequestError(f"request must be a JSON object, got {type(obj).__name__}")
     cmd = obj.get("cmd")

@@ -17,7 +17,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -126,7 +125,7 @@ def read_recording(path: str | Path) -> Iterator[tuple[str, int, dict[str, Any]]
                     channels[rec.id] = rec.topic
                 elif isinstance(rec, Message):
                     yield channels.get(rec.channel_id, "?"), rec.log_time, json.loads(rec.data)
-        except (McapError, EOFError, ValueError, OSError, Exception):  # noqa: BLE001
+        except Exception:  # noqa: BLE001
             # A torn last record (end of file, half a chunk, a bad CRC or zstd frame) ends the
             # recording: everything before it has been yielded.
             return

@@ -271,10 +271,11 @@ class Daemon:
         raise RequestError(f"unknown command {req.cmd!r}")
 
     def set_method(self, method: str) -> None:
-        method_spec(method)  # raises on an unknown name
+        spec = method_spec(method)  # raises on an unknown name
         self.method = method
         self.action, self.action_until, self.question = NO_ASSIST, 0.0, None
-        self.planner_status = WorkerStatus.IDLE if not method_spec(method).planned else self.planner_status
+        if not spec.planned:
+            self.planner_status = WorkerStatus.IDLE
         self.event("method", method=method)
 
     def status(self) -> dict[str, Any]:
@@ -703,12 +704,9 @@ class Daemon:
         elif opts.input == "evdev":
             from ..io.joystick import EvdevJoystick
 
-            self.joystick = EvdevJoystick(cfg.joystick, self._on_evdev_axes, self.on_button, self.on_joystick_link)
+            self.joystick = EvdevJoystick(cfg.joystick, self.set_axes, self.on_button, self.on_joystick_link)
         else:
             raise ValueError(f"unknown input backend {opts.input!r} (sim or evdev)")
-
-    def _on_evdev_axes(self, axes: np.ndarray) -> None:
-        self.set_axes(axes)
 
     async def _wait_ready(self) -> None:
         """Wait (without blocking the loops) for the planner worker and the speech engine."""
