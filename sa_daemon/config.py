@@ -12,7 +12,15 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 PositiveFloat = float
 
@@ -142,6 +150,9 @@ class SimUserConfig(_Section):
     persist_progress: float = Field(
         0.5, ge=0, lt=1, description="... (error shrank by less than this fraction of its own commanded motion)"
     )
+    blocked_rotate_s: float = Field(
+        2.0, gt=0, description="the arm refuses the approach (safety halt) this long: rotate first (s)"
+    )
     pregrasp_standoff_m: float = Field(0.06, ge=0, description="first translate to this far back along the approach")
     pregrasp_tolerance_m: float = Field(0.02, gt=0, description="then rotate once within this of the pre-grasp point")
     rotation_done_rad: float = Field(math.pi / 96, gt=0, description="rotation is finished within this")
@@ -167,7 +178,7 @@ class RuntimeConfig(_Section):
     belief_hz: float = Field(40.0, gt=0, le=200, description="belief update = joystick sampling rate (Hz)")
     publish_hz: float = Field(30.0, ge=20, le=200, description="state messages on the PUB socket (Hz)")
     question_timeout_s: float = Field(20.0, gt=0, description="an unanswered question is dropped after this (s)")
-    worker_hang_s: float = Field(1.0, gt=0, description="a planner silent this long past its deadline is killed (s)")
+    worker_hang_s: float = Field(0.5, gt=0, description="a planner silent this long past its deadline is killed (s)")
     worker_start_timeout_s: float = Field(30.0, gt=0, description="time a new planner worker has to come up (s)")
     worker_nice: int = Field(5, ge=0, le=19, description="niceness added to the planner worker (lower priority)")
 
@@ -185,6 +196,10 @@ class SafetyConfig(_Section):
     )
     singularity_slow: float = Field(17.0, gt=1, description="Jacobian condition number where slowing starts")
     singularity_stop: float = Field(30.0, gt=1, description="condition number where motion toward it stops")
+    singularity_share: float = Field(
+        0.15, ge=0, lt=1, description="a command moves toward a singularity when its share along the weakest "
+        "direction exceeds this (MoveIt Servo: 0)"
+    )
     joint_margin_rad: float = Field(0.1, ge=0, description="halt a joint moving toward a bound within this (rad)")
 
     @model_validator(mode="after")
@@ -216,7 +231,7 @@ class XArmConfig(_Section):
 class ArmConfig(_Section):
     """Which arm drives the gripper, and its backend settings."""
 
-    backend: str = Field("kinematic", pattern="^(kinematic|mujoco|xarm)$", description="kinematic, mujoco or xarm")
+    backend: str = Field("mujoco", pattern="^(kinematic|mujoco|xarm)$", description="kinematic, mujoco or xarm")
     mujoco: MujocoConfig = MujocoConfig()
     xarm: XArmConfig = XArmConfig()
 
@@ -249,12 +264,56 @@ class SpeechConfig(_Section):
 
 
 class ZmqConfig(_Section):
-    """The ZeroMQ sockets (``docs/protocol.md``)."""
+    """The ZeroMQ sockets and who may use them (``docs/protocol.md``, section 5).
+
+    ``cmd`` may be a non-loopback endpoint only with CURVE on (``curve_server_secret`` and
+    ``curve_clients_dir``, made by ``sa-daemon keygen``): ``sa-daemon run`` refuses to start otherwise.
+    ``pub`` is read-only and may be exposed without CURVE. Key paths are files written by
+    ``sa-daemon keygen``; relative paths are relative to the working directory (use absolute ones).
+    """
 
     pub: str = Field("tcp://127.0.0.1:5555", min_length=1, description="PUB endpoint (state, event)")
     cmd: str = Field("tcp://127.0.0.1:5556", min_length=1, description="command endpoint (REQ clients)")
     max_request_bytes: int = Field(65536, ge=256, description="longer requests are refused")
     max_json_depth: int = Field(8, ge=1, le=64, description="deeper requests are refused")
+    curve_server_secret: str = Field(
+        "", description="daemon: its CURVE secret key file (DIR/server.key_secret); '' = CURVE off, cmd loopback only"
+    )
+    curve_clients_dir: str = Field(
+        "", validate_default=True,
+        description="daemon: directory of the allowed clients' public keys (*.key); needs curve_server_secret",
+    )
+    curve_pub: bool = Field(
+        True, description="with CURVE on, the PUB stream is encrypted and readable by allowed clients only"
+    )
+    curve_client_secret: str = Field(
+        "", description="answer/monitor: this client's CURVE secret key file (DIR/clients/NAME.key_secret)"
+    )
+    curve_server_public: str = Field(
+        "", validate_default=True,
+        description="answer/monitor: the daemon's public key file (DIR/server.key); needs curve_client_secret",
+    )
+
+    @field_validator("curve_clients_dir")
+    @classmethod
+    def _clients_dir_with_server_key(cls, v: str, info: ValidationInfo) -> str:
+        return _paired(v, info.data.get("curve_server_secret"), "curve_clients_dir", "curve_server_secret")
+
+    @field_validator("curve_server_public")
+    @classmethod
+    def _server_public_with_client_key(cls, v: str, info: ValidationInfo) -> str:
+        return _paired(v, info.data.get("curve_client_secret"), "curve_server_public", "curve_client_secret")
+
+
+def _paired(value: str, other: str | None, key: str, other_key: str) -> str:
+    """Two key-file settings that only make sense together: both set or both empty."""
+    if other is None:  # the other key failed its own validation, which is reported
+        return value
+    if other and not value:
+        raise ValueError(f"required when zmq.{other_key} is set (sa-daemon keygen prints both)")
+    if value and not other:
+        raise ValueError(f"needs zmq.{other_key} too (sa-daemon keygen prints both)")
+    return value
 
 
 class RecordConfig(_Section):
@@ -316,6 +375,8 @@ def _format(err: ValidationError, source: str) -> str:
         msg = e["msg"]
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
+        elif e["type"] == "value_error":
+            msg = msg.removeprefix("Value error, ")
         lines.append(f"{source}: {key}: {msg}")
     return "\n".join(lines)
 

@@ -25,8 +25,8 @@ from sa_daemon.planner.scene import load_scene
 TABLE_XYZ = [(0, 0, 0.267), (0, 0, 0), (0.0535, -0.2845, 0), (0.0775, 0.3425, 0), (0, 0, 0), (0.076, 0.097, 0)]
 TABLE_RPY = [(0, 0, 0), (-1.5708, 0, 0), (0, 0, 0), (-1.5708, 0, 0), (1.5708, 0, 0), (-1.5708, 0, 0)]
 TCP_M = 0.172
-LOWER = [-0.99 * math.pi, -2.059, -3.927, -0.99 * math.pi, -1.69297, -0.99 * math.pi]
-UPPER = [0.99 * math.pi, 2.0944, 0.19198, 0.99 * math.pi, math.pi, 0.99 * math.pi]
+LOWER = [-2 * math.pi, -2.059, -3.927, -2 * math.pi, -1.69297, -2 * math.pi]
+UPPER = [2 * math.pi, 2.0944, 0.19198, 2 * math.pi, math.pi, 2 * math.pi]
 
 
 def table_fk(q) -> tuple[np.ndarray, np.ndarray]:

@@ -14,17 +14,13 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
-import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 import zmq
-from helpers import free_port, process_gone, wav_stats
+from helpers import CLI, START_TIMEOUT_S, DaemonProc, free_port, process_gone, wav_stats
 
 from sa_daemon.arm.safety import SafetyCode
 from sa_daemon.config import Config
@@ -38,140 +34,6 @@ STATE_KEYS = {
     "v", "t", "mode", "user_twist", "robot_twist", "command_twist", "gripper_pose", "gripper_closed", "belief",
     "action", "question", "planner", "safety", "safety_codes", "method", "assist", "stopped", "arm", "input", "task",
 }
-START_TIMEOUT_S = 60.0
-CLI = [sys.executable, "-m", "sa_daemon.cli"]
-
-
-class Collector(threading.Thread):
-    """Subscribe to everything on ``endpoint`` (connected before the daemon binds, so nothing after its
-    start is missed) and keep ``(received_at, topic, message)``."""
-
-    def __init__(self, endpoint: str) -> None:
-        super().__init__(daemon=True, name="test-collector")
-        self.ctx = zmq.Context()
-        self.sock = self.ctx.socket(zmq.SUB)
-        self.sock.setsockopt(zmq.SUBSCRIBE, b"")
-        self.sock.setsockopt(zmq.RCVHWM, 0)
-        self.sock.setsockopt(zmq.LINGER, 0)
-        self.sock.connect(endpoint)
-        self.msgs: list[tuple[float, str, dict[str, Any]]] = []
-        self.cond = threading.Condition()
-        self._halt = threading.Event()
-
-    def run(self) -> None:
-        try:
-            while not self._halt.is_set():
-                if self.sock.poll(50):
-                    topic, data = self.sock.recv_multipart()
-                    with self.cond:
-                        self.msgs.append((time.monotonic(), topic.decode(), json.loads(data)))
-                        self.cond.notify_all()
-        finally:
-            self.sock.close(0)
-            self.ctx.term()
-
-    def halt(self) -> None:
-        self._halt.set()
-        self.join(5)
-
-    def __len__(self) -> int:
-        with self.cond:
-            return len(self.msgs)
-
-    def wait_for(self, pred: Callable[[str, dict], bool], timeout_s: float, start: int = 0,
-                 what: str = "message") -> tuple[int, dict]:
-        """The first message at index >= ``start`` matching ``pred``: ``(index, message)``."""
-        end = time.monotonic() + timeout_s
-        i = start
-        with self.cond:
-            while True:
-                while i < len(self.msgs):
-                    _, topic, msg = self.msgs[i]
-                    if pred(topic, msg):
-                        return i, msg
-                    i += 1
-                left = end - time.monotonic()
-                if left <= 0:
-                    raise AssertionError(f"no {what} within {timeout_s} s")
-                self.cond.wait(min(left, 0.5))
-
-    def event(self, kind: str, timeout_s: float = 30.0, start: int = 0, **match: Any) -> tuple[int, dict]:
-        return self.wait_for(
-            lambda tp, m: tp == "event" and m["type"] == kind and all(m.get(k) == v for k, v in match.items()),
-            timeout_s, start, what=f"{kind} event {match or ''}",
-        )
-
-    def state(self, pred: Callable[[dict], bool] = lambda s: True, timeout_s: float = 30.0, start: int = 0,
-              what: str = "state") -> tuple[int, dict]:
-        return self.wait_for(lambda tp, m: tp == "state" and pred(m), timeout_s, start, what=what)
-
-    def slice(self, start: int = 0, end: int | None = None, topic: str | None = None) -> list[dict]:
-        with self.cond:
-            part = self.msgs[start:end]
-        return [m for _, tp, m in part if topic is None or tp == topic]
-
-    def latest_state(self) -> dict:
-        with self.cond:
-            for _, tp, m in reversed(self.msgs):
-                if tp == "state":
-                    return m
-        raise AssertionError("no state yet")
-
-
-class DaemonProc:
-    """One ``sa-daemon run`` subprocess with its own ports, files and collector."""
-
-    def __init__(self, workdir: Path, *extra: str, config: str | None = None) -> None:
-        self.dir = workdir
-        workdir.mkdir(parents=True, exist_ok=True)
-        self.pub = f"tcp://127.0.0.1:{free_port()}"
-        self.cmd = f"tcp://127.0.0.1:{free_port()}"
-        self.collector = Collector(self.pub)
-        self.collector.start()
-        args = [*CLI]
-        if config is not None:
-            cfg = workdir / "config.toml"
-            cfg.write_text(config)
-            args += ["--config", str(cfg)]
-        args += ["run", "--arm", "kinematic", "--input", "sim", "--scene", "scene1", "--task", "cup:top",
-                 "--pub", self.pub, "--cmd", self.cmd, "--quiet", *extra]
-        self.stdout = open(workdir / "stdout.txt", "wb")  # noqa: SIM115
-        self.stderr = open(workdir / "stderr.txt", "wb")  # noqa: SIM115
-        self.proc = subprocess.Popen(args, cwd=workdir, stdout=self.stdout, stderr=self.stderr)
-
-    @property
-    def log(self) -> str:
-        if not self.stderr.closed:
-            self.stderr.flush()
-        return (self.dir / "stderr.txt").read_text(errors="replace")[-3000:]
-
-    def wait_ready(self) -> dict:
-        try:
-            _, ev = self.collector.event("ready", START_TIMEOUT_S)
-        except AssertionError:
-            raise AssertionError(f"daemon not ready (exit {self.proc.poll()}): {self.log}") from None
-        return ev
-
-    def request(self, obj: dict | bytes, timeout_s: float = 5.0) -> dict:
-        return request(self.cmd, obj, timeout_s=timeout_s)
-
-    def stop(self, sig: int = signal.SIGTERM, timeout_s: float = 30.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-        try:
-            rc = self.proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            rc = self.proc.wait()
-        return rc
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.stop()
-        self.collector.halt()
-        self.stdout.close()
-        self.stderr.close()
-
 
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory):

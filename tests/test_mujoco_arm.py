@@ -185,7 +185,7 @@ def test_cli_eval_accepts_the_mujoco_arm_in_a_spawn_pool(tmp_path):
     out = tmp_path / "eval.json"
     r = subprocess.run(
         [sys.executable, "-m", "sa_daemon.cli", "eval", "--scene", "scene1", "--task", "cup:top", "--method",
-         "policy", "--seeds", "2", "--jobs", "2", "--arm", "mujoco", "--quiet", "--json", str(out)],
+         "ho", "--seeds", "2", "--jobs", "2", "--arm", "mujoco", "--quiet", "--json", str(out)],
         check=False, capture_output=True, text=True, timeout=120,
     )
     assert r.returncode == 0, r.stderr
@@ -239,3 +239,5 @@ def test_scene_objects_are_free_bodies_resting_on_the_table(arm, scene1):
     for obj, body in zip(scene1.objects, arm.world.object_bodies):
         assert arm.model.body_jntnum[body] == 1  # one free joint
         np.testing.assert_allclose(arm.data.xpos[body], obj.position, atol=1e-3)
+    table = arm.model.geom("table")
+    assert arm.data.geom_xpos[table.id][2] + table.size[2] == pytest.approx(scene1.table_z)  # top at table_z

@@ -128,5 +128,24 @@ def test_period_ring_is_bounded():
     for _ in range(1000):
         st.add(0.01)
     assert st.ticks == 1000
-    assert len(st.periods_s) <= 200
+    assert len(st.periods_s) == 100
     assert st.summary()["rate_hz"] == pytest.approx(100.0)
+    for _ in range(100):  # the ring holds the latest samples only
+        st.add(0.02)
+    assert st.summary()["rate_hz"] == pytest.approx(50.0)
+
+
+def test_ring_memory_is_fixed_and_it_keeps_the_last_samples():
+    from sa_daemon.runtime.rate import Ring
+
+    r = Ring(4)
+    buf = r._buf
+    assert len(r) == 0 and r.values().size == 0
+    for v in range(10):
+        r.append(float(v))
+    assert r._buf is buf and buf.size == 4  # no reallocation however many samples arrive
+    assert sorted(r.values().tolist()) == [6.0, 7.0, 8.0, 9.0]
+    r.clear()
+    assert len(r) == 0
+    with pytest.raises(ValueError):
+        Ring(0)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sa_daemon.arm.safety import SafetyCode, SafetyPipeline
+from sa_daemon.arm.safety import SafetyCode, SafetyPipeline, SafetyResult
 from sa_daemon.config import LimitsConfig, SafetyConfig
 from sa_daemon.geometry import Pose
 
@@ -93,7 +93,9 @@ def test_workspace_blocks_leaving_but_allows_returning():
 
 class _Kin:
     """A 6-joint arm whose Jacobian is diagonal with configurable conditioning (test double of the
-    ``Kinematics`` protocol: the real one is Pinocchio's, tested in test_arm_kinematics)."""
+    ``Kinematics`` protocol: the real one is Pinocchio's, tested in test_arm_kinematics). The weak
+    direction is linear x: joint 0 moves the TCP along x at ``ell / k(q)``, so with ``k`` growing in
+    ``q0`` a +x command drives the arm toward the singularity."""
 
     def __init__(self, kappa_of_q):
         self.lower = np.full(6, -2.0)
@@ -104,7 +106,7 @@ class _Kin:
     def jacobian(self, q):
         k = self.kappa_of_q(np.asarray(q))
         ell = CFG.characteristic_length_m  # the pipeline divides linear rows by it: condition = k
-        return np.diag([ell, ell, ell, 1.0, 1.0, 1.0 / k])
+        return np.diag([ell / k, ell, ell, 1.0, 1.0, 1.0])
 
     def joint_velocities(self, q, twist):
         return np.linalg.solve(self.jacobian(q), np.asarray(twist, dtype=float))
@@ -115,20 +117,38 @@ class _Kin:
 
 def test_singularity_slows_then_halts_when_moving_toward_it():
     kin = _Kin(lambda q: 10.0 + 20.0 * q[0])  # kappa grows with q0
-    twist = [0.05, 0, 0, 0, 0, 0]
+    twist = [0.02, 0, 0, 0, 0, 0]
     q_slow = np.array([0.4, 0, 0, 0, 0, 0])  # kappa 18
     p = pipe(kinematics=kin)
     for _ in range(100):
         r = p.filter(twist, CENTRE, joints=q_slow)
     assert r.status is SafetyCode.SINGULARITY_SLOW
-    assert r.twist[0] == pytest.approx(0.05 * (1 - (18 - 17) / 13))
+    assert r.twist[0] == pytest.approx(0.02 * (1 - (18 - 17) / 13))
     r = p.filter(twist, CENTRE, joints=np.array([1.2, 0, 0, 0, 0, 0]))  # kappa 34
     assert r.status is SafetyCode.SINGULARITY_HALT and not np.any(r.twist)
     # Moving away from it is allowed at full speed.
     p2 = pipe(kinematics=kin)
     for _ in range(100):
-        r = p2.filter([-0.05, 0, 0, 0, 0, 0], CENTRE, joints=np.array([1.2, 0, 0, 0, 0, 0]))
-    assert r.codes == () and r.twist[0] == pytest.approx(-0.05)
+        r = p2.filter([-0.015, 0, 0, 0, 0, 0], CENTRE, joints=np.array([1.2, 0, 0, 0, 0, 0]))
+    assert r.codes == () and r.twist[0] == pytest.approx(-0.015)
+
+
+@pytest.mark.parametrize("twist, halted", [
+    ([0.0, 0.05, 0.0, 0.0, 0.0, 0.0], False),  # no share along the weak direction (x): passes
+    ([0.01, 0.05, 0.0, 0.0, 0.0, 0.0], True),  # share 0.2 > 0.15
+    ([0.005, 0.05, 0.0, 0.0, 0.0, 0.0], False),  # share 0.1: within the dead band
+])
+def test_beyond_stop_only_a_share_toward_the_singularity_halts(twist, halted):
+    kin = _Kin(lambda q: 10.0 + 20.0 * q[0])
+    p = pipe(kinematics=kin)
+    q = np.array([1.2, 0, 0, 0, 0, 0])  # kappa 34
+    for _ in range(100):
+        r = p.filter(twist, CENTRE, joints=q)
+    if halted:
+        assert r.status is SafetyCode.SINGULARITY_HALT and not np.any(r.twist)
+    else:
+        assert r.codes == ()
+        np.testing.assert_allclose(r.twist, twist)
 
 
 def test_joint_near_bound_halts_only_toward_it():
@@ -142,12 +162,13 @@ def test_joint_near_bound_halts_only_toward_it():
 
 
 def test_joint_speed_scales_the_whole_command():
-    kin = _Kin(lambda q: 16.0)  # joint 6 needs 16x the angular speed
+    kin = _Kin(lambda q: 16.0)  # joint 0 needs 16 / 0.3 rad per m of x
     p = pipe(kinematics=kin)
-    r = ramp(p, [0, 0, 0, 0, 0, 0.5], n=300, joints=np.zeros(6))
+    r = ramp(p, [0.1, 0.05, 0, 0, 0, 0], n=300, joints=np.zeros(6))
     assert SafetyCode.JOINT_SPEED in r.codes
     qdot = kin.joint_velocities(np.zeros(6), r.twist)
-    assert np.max(np.abs(qdot)) <= 2.14 + 1e-9
+    assert np.max(np.abs(qdot)) == pytest.approx(2.14)
+    assert r.twist[1] / r.twist[0] == pytest.approx(0.5)  # the whole command scaled: direction kept
 
 
 def test_most_severe_code_is_the_status():
@@ -216,7 +237,32 @@ def test_joint_stages_never_drive_a_joint_past_its_margin_or_speed(seq):
         near_lo = q - kin.lower < CFG.joint_margin_rad
         near_hi = kin.upper - q < CFG.joint_margin_rad
         assert not np.any(near_lo & (qdot < 0)) and not np.any(near_hi & (qdot > 0))
-        kappa = p._condition(q)
+        kappa, share = p.singularity_share(q, r.twist)
         if kappa >= CFG.singularity_stop:
-            ahead = p._condition(q + qdot * DT)
-            assert ahead <= kappa + 1e-9
+            assert share <= CFG.singularity_share + 1e-9
+
+
+def test_the_xarm_crosses_its_wrist_singularity_in_plane_but_not_sideways():
+    """Real kinematics: joint 5 at 0.005 rad (wrist straight, condition number above the stop). A pitch
+    or an in-plane translation needs nothing the singularity removes and passes untouched; a sideways
+    translation into the singularity halts, and out of it passes."""
+    from sa_daemon.arm.kinematics import ArmKinematics
+
+    q = np.array([0.0, -0.99, -0.07, 0.0, 0.005, 0.0])
+    p = pipe(kinematics=ArmKinematics())
+    assert p._condition(q) > CFG.singularity_stop
+    for twist in ([0, 0, 0, 0, -0.3, 0], [0, 0, -0.05, 0, 0, 0], [0.04, 0, 0.03, 0, 0, 0]):
+        r = ramp(pipe(kinematics=ArmKinematics()), twist, n=100, joints=q)
+        assert SafetyCode.SINGULARITY_HALT not in r.codes and SafetyCode.SINGULARITY_SLOW not in r.codes
+        np.testing.assert_allclose(r.twist, twist, atol=1e-12)
+    sideways = [ramp(pipe(kinematics=ArmKinematics()), [0, s, 0, 0, 0, 0], n=100, joints=q) for s in (0.05, -0.05)]
+    assert sorted(r.status.value for r in sideways) == ["ok", "singularity_halt"]
+
+
+def test_refuses_means_a_joint_stage_let_almost_nothing_through():
+    asked = np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert SafetyResult(np.zeros(6), (SafetyCode.SINGULARITY_HALT,)).refuses(asked)
+    assert SafetyResult(asked * 0.05, (SafetyCode.SINGULARITY_SLOW,)).refuses(asked)
+    assert not SafetyResult(asked * 0.5, (SafetyCode.SINGULARITY_SLOW,)).refuses(asked)
+    assert not SafetyResult(np.zeros(6), (SafetyCode.ACCEL,)).refuses(asked)  # not the arm refusing
+    assert not SafetyResult(np.zeros(6), (SafetyCode.JOINT_BOUND,)).refuses(np.zeros(6))  # nothing asked

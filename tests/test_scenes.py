@@ -67,10 +67,12 @@ def test_builtin_scene_goals(name: str) -> None:
         assert 2 <= len(goal.poses) <= 16, goal
         fine = goal.grasp_type not in (G.TOP, G.SIDE)
         for pose in goal.poses:
-            assert is_reachable(pose)
+            assert is_reachable(pose, scene.table_z)
             assert classify_grasp(pose, fine) == goal.grasp_type
-    # the same start pose everywhere: TCP at (0.25, 0, 0.35), tool z forward and down at 45 deg
-    np.testing.assert_allclose(scene.start.position, [0.25, 0.0, 0.35])
+    # the same mount and start pose everywhere: table top 0.2 m above the base, TCP 0.35 m above the table,
+    # tool z forward and down at 45 deg
+    assert scene.table_z == pytest.approx(0.2)
+    np.testing.assert_allclose(scene.start.position, [0.25, 0.0, 0.55])
     np.testing.assert_allclose(scene.start.rotation[:, 2], [math.sqrt(0.5), 0.0, -math.sqrt(0.5)], atol=1e-6)
 
 
@@ -103,7 +105,7 @@ def test_builtin_objects_on_the_table_in_front_without_overlap(name: str) -> Non
     cover = np.zeros(xs.shape, dtype=int)
     for obj in scene.objects:
         assert 0.3 <= obj.position[0] <= 0.6, obj.name
-        assert obj.bottom_z == pytest.approx(0.0, abs=1e-9), obj.name
+        assert obj.bottom_z == pytest.approx(scene.table_z, abs=1e-9), obj.name
         cover += footprint(obj, xs, ys)
     assert cover.max() == 1, "objects overlap"
 
@@ -232,6 +234,9 @@ BAD_FILES = [
     (("name = \"cup\"\n", ""), ["objects[0]: name: required key missing"]),
     ((TYPES + "\n", TYPES + "\n" + SECOND), ["objects[1] 'cup': name: duplicate of objects[0]"]),
     (("name = \"my-scene\"", "name = \"my-scene"), ["invalid TOML"]),
+    (("name = \"my-scene\"", "name = \"my-scene\"\ntable_z = 0.1"), [CUP + ": position: ", "table_z = 0.1"]),
+    (("name = \"my-scene\"", "name = \"my-scene\"\ntable_z = 0.9"), ["table_z: 0.9 m is outside"]),
+    (("name = \"my-scene\"", "name = \"my-scene\"\ntable_z = nan"), ["table_z"]),
 ]
 
 
@@ -261,3 +266,36 @@ def test_rim_on_a_box_is_refused() -> None:
 def test_unknown_scene_name() -> None:
     with pytest.raises(SceneError, match="scene1, scene2, study-simple"):
         load_scene("scene9")
+
+
+def _lifted(text: str, dz: float) -> str:
+    """``text`` with every ``position`` raised by ``dz`` m and ``table_z = dz``."""
+    import re
+
+    def up(m: re.Match[str]) -> str:
+        x, y, z = (float(v) for v in m.group(1).split(","))
+        return f"position = [{x}, {y}, {z + dz}]"
+
+    return re.sub(r"position = \[([^\]]*)\]", up, text).replace('name = "my-scene"', f'name = "my-scene"\ntable_z = {dz}')
+
+
+@pytest.mark.parametrize("dz", [-0.1, 0.2, 0.35])
+def test_a_raised_table_lifts_start_objects_and_grasps_unchanged(tmp_path: Path, dz: float) -> None:
+    """Lifting everything with the table keeps every grasp (the reach heights are above the table top)
+    as long as the shoulder sphere still reaches them: the built-in scenes rely on this."""
+    flat = load_scene(write(tmp_path, EXAMPLE, "flat.toml"))
+    lifted = load_scene(write(tmp_path, _lifted(EXAMPLE, dz), "lifted.toml"))
+    assert lifted.table_z == dz
+    up = np.array([0.0, 0.0, dz])
+    np.testing.assert_allclose(lifted.start.position, flat.start.position + up)
+    for a, b in zip(flat.goals, lifted.goals, strict=True):
+        assert a.target == b.target and len(a.poses) == len(b.poses)
+        for p, q in zip(a.poses, b.poses):
+            np.testing.assert_allclose(q.position, p.position + up, atol=1e-12)
+            np.testing.assert_allclose(q.quat_wxyz, p.quat_wxyz, atol=1e-12)
+
+
+def test_reach_heights_are_above_the_table_top() -> None:
+    pose = grasp_pose([0.4, 0.0, 0.21], np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]))
+    assert is_reachable(pose, table_z=0.2)  # TCP 1 cm above the table top
+    assert not is_reachable(pose, table_z=0.207)  # TCP 3 mm above it: below the 5 mm floor

@@ -217,6 +217,28 @@ def test_a_user_making_progress_does_not_push_harder():
         assert np.linalg.norm(inp.axes) < 0.5
 
 
+
+@pytest.mark.parametrize("yaw_offset, blocked, rotates", [(0.5, True, True), (0.0, True, False), (0.5, False, False)])
+def test_a_user_the_arm_refuses_rotates_first_then_translates_on(yaw_offset, blocked, rotates):
+    """Refused on the way to the pre-grasp point (a safety halt, e.g. at a wrist singularity), the user
+    turns the gripper after blocked_rotate_s and translates again once aligned. With nothing to turn, or
+    when merely not progressing (assistance pushing back: the arm does not refuse), it keeps pushing."""
+    user = _user(_cfg(blocked_rotate_s=0.5))
+    far = _pose(PREGRASP + np.array([0.10, -0.08, 0.05]), yaw_offset=yaw_offset)
+    modes = [user.act(far, blocked=blocked).mode for _ in range(int(1.0 / DT))]
+    if not rotates:
+        assert set(modes) == {Mode.TRANSLATION}
+        return
+    first = modes.index(Mode.ROTATION)
+    assert 0.5 / DT - 1 <= first <= 0.5 / DT + 1  # the 20th blocked sample switches
+    assert set(modes[first:]) == {Mode.ROTATION}
+    aligned = _pose(far.position)  # far off the approach line: the detour does not back out ...
+    inp = _settle(user, aligned)
+    assert inp.mode is Mode.TRANSLATION  # ... it translates on to the pre-grasp point once aligned
+    np.testing.assert_array_less(0.0, np.dot(inp.axes, PREGRASP - aligned.position))
+    assert user.mode_changes == 2
+
+
 # -- closing -------------------------------------------------------------------------------------------
 
 

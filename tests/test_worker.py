@@ -9,7 +9,6 @@ import time
 
 import numpy as np
 import pytest
-
 from helpers import process_gone
 
 from sa_daemon.config import Config

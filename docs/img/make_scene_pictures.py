@@ -14,16 +14,16 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Circle, Polygon, Rectangle
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
-from sa_daemon.geometry import Pose  # noqa: E402
-from sa_daemon.planner.grasps import SHOULDER_M, grasp_pose, wrist_point  # noqa: E402
-from sa_daemon.planner.scene import Scene, SceneObject, load_scene  # noqa: E402
+from sa_daemon.geometry import Pose
+from sa_daemon.planner.grasps import SHOULDER_M, grasp_pose, wrist_point
+from sa_daemon.planner.scene import Scene, SceneObject, load_scene
 
 ARROW_M = 0.05  # drawn length of an approach arrow
 TICK_M = 0.012  # half-length of a closing-axis tick
@@ -63,7 +63,7 @@ def _draw_pose(top: plt.Axes, side: plt.Axes, pose: Pose, color: str, lw: float 
     p, y, z = pose.position, rot[:, 1], rot[:, 2]
     tail = p - ARROW_M * z
     for ax, (i, si), (j, sj) in ((top, (1, -1), (0, 1)), (side, (0, 1), (2, 1))):
-        u = lambda v: (si * v[i], sj * v[j])  # noqa: E731 - project onto the view plane
+        u = lambda v: (si * v[i], sj * v[j])
         (tx, ty), (px, py) = u(tail), u(p)
         if math.hypot(px - tx, py - ty) > 1e-4:
             ax.annotate("", xy=(px, py), xytext=(tx, ty),
@@ -92,10 +92,10 @@ def draw_scene(scene: Scene, path: Path) -> None:
     top.text(0.0, 0.02, "robot base", ha="center", fontsize=7)
     side.plot([0, 0], [0, SHOULDER_M[2]], color="0.3", lw=4)
     side.plot(0, SHOULDER_M[2], "ko", ms=5)
-    side.axhline(0, color="0.3", lw=1)
+    side.axhline(scene.table_z, color="0.3", lw=1)  # the table top
     top.set(xlim=(-0.45, 0.45), ylim=(-0.05, 0.68), aspect="equal", xlabel="-y (m)  (robot's left is left)",
             ylabel="x (m)  forward", title=f"{scene.name}: top view")
-    side.set(xlim=(-0.05, 0.72), ylim=(-0.03, 0.55), aspect="equal", xlabel="x (m)", ylabel="z (m)",
+    side.set(xlim=(-0.05, 0.72), ylim=(-0.03, 0.75), aspect="equal", xlabel="x (m)", ylabel="z (m)",
              title=f"{scene.name}: side view (looking from the right)")
     for ax in (top, side):
         ax.grid(lw=0.3, alpha=0.5)

@@ -10,6 +10,8 @@ from ..planner.scene import Scene
 from .base import Arm
 
 BACKENDS = ("kinematic", "mujoco", "xarm")
+JOINTED_BACKENDS = ("mujoco", "xarm")
+"""Backends with joints (``Arm.kinematics``): the xArm-6 model, its bounds and singularities."""
 
 
 def make_arm(backend: str, scene: Scene, cfg: Config) -> Arm:

@@ -76,7 +76,7 @@ def dls(jac: FloatArray, twist: FloatArray) -> FloatArray:
 class ArmKinematics:
     """Implements :class:`sa_daemon.arm.base.Kinematics` for the xArm-6 TCP.
 
-    ``lower``/``upper``: joint bounds (rad) from the MJCF (the published limits, +-0.99 pi on joints 1, 4
+    ``lower``/``upper``: joint bounds (rad) from the MJCF (the published limits, +-2 pi on joints 1, 4
     and 6); ``velocity_limit``: 2.14 rad/s per joint; ``joint_margin``: a joint closer than this (rad) to a
     bound is not moved toward it by :meth:`joint_velocities`.
     """

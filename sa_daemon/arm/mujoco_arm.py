@@ -70,6 +70,7 @@ class MujocoArm(Arm):
         self._limits = cfg.limits
         self.kinematics = ArmKinematics(joint_margin=cfg.safety.joint_margin_rad)
         self.world = build_scene_model(scene, cfg.arm.mujoco.timestep_s)
+        self.table_z = scene.table_z  # m, base frame
         self.model = self.world.model
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -248,7 +249,7 @@ class MujocoArm(Arm):
             self._frame += 1
         if camera is None:
             camera = mujoco.MjvCamera()
-            camera.lookat[:] = (0.3, 0.0, 0.12)
+            camera.lookat[:] = (0.3, 0.0, self.table_z + 0.12)
             camera.distance, camera.azimuth, camera.elevation = 1.4, -140.0, -25.0
         try:
             if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):

@@ -1,8 +1,10 @@
 """The MuJoCo world of a scene: the xArm-6 of ``xarm6.xml`` on a pedestal, a table and the scene's objects.
 
 Frames and units as in the scene files: base frame x forward, y left, z up (m); the arm base is at the
-origin and the table top at z = 0. The table starts at ``TABLE_X0_M`` in front of the base, so the base
-(on its own pedestal below z = 0) never touches it. Every object is a free body resting on the table:
+origin and the table top at the scene's ``table_z`` (0.2 m in the built-in scenes: a wheelchair mount
+below a 0.75 m table). The floor is ``TABLE_HEIGHT_M`` below the table top and the arm stands on a
+pedestal from the floor to its base. The table starts at ``TABLE_X0_M`` in front of the base, so the
+base never touches it. Every object is a free body resting on the table:
 boxes, cylinders and spheres with the scene's sizes, position and yaw. Containers (``rim = true``) are
 hollow - a bottom and a wall of ``WALL_SEGMENTS`` boxes, ``WALL_M`` thick - so rim grasps, whose TCP sits
 in the middle of the wall, pinch a real wall with one finger inside.
@@ -27,8 +29,8 @@ TABLE_X0_M = 0.12
 """Near edge of the table (m, base x); the base cylinder has a 0.065 m radius."""
 TABLE_SIZE_M = (0.9, 1.4, 0.04)
 """Table extent along x, y and thickness (m)."""
-PEDESTAL_M = 0.7
-"""Height of the arm's pedestal below the base (m); the floor is at z = -PEDESTAL_M."""
+TABLE_HEIGHT_M = 0.75
+"""Table top above the floor (m); the arm's pedestal fills the floor-to-base gap."""
 WALL_M = 0.006
 """Wall thickness of containers (m): twice the grasp generator's 3 mm rim inset."""
 WALL_SEGMENTS = 16
@@ -110,13 +112,15 @@ def build_scene_model(scene: Scene, timestep_s: float, arm_xml: str | Path | Non
     spec.visual.global_.offheight = 960
     world = spec.worldbody
     tx, ty, tz = TABLE_SIZE_M
+    top = scene.table_z
+    floor = top - TABLE_HEIGHT_M  # below the base for every accepted table_z (<= 0.5 m)
     _world_geom(world, name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[tx / 2, ty / 2, tz / 2],
-                pos=[TABLE_X0_M + tx / 2, 0.0, -tz / 2], rgba=[0.6, 0.45, 0.3, 1.0])
-    _world_geom(world, name="pedestal", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.08, PEDESTAL_M / 2, 0],
-                pos=[0.0, 0.0, -PEDESTAL_M / 2], rgba=[0.25, 0.25, 0.25, 1.0])
+                pos=[TABLE_X0_M + tx / 2, 0.0, top - tz / 2], rgba=[0.6, 0.45, 0.3, 1.0])
+    _world_geom(world, name="pedestal", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.08, -floor / 2, 0],
+                pos=[0.0, 0.0, floor / 2], rgba=[0.25, 0.25, 0.25, 1.0])
     _world_geom(world, name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2.0, 2.0, 0.1],
-                pos=[0.0, 0.0, -PEDESTAL_M], rgba=[0.8, 0.8, 0.8, 1.0])
-    world.add_light(name="top", pos=[0.4, 0.0, 1.6], dir=[0.0, 0.0, -1.0], diffuse=[0.7, 0.7, 0.7])
+                pos=[0.0, 0.0, floor], rgba=[0.8, 0.8, 0.8, 1.0])
+    world.add_light(name="top", pos=[0.4, 0.0, top + 1.6], dir=[0.0, 0.0, -1.0], diffuse=[0.7, 0.7, 0.7])
     for obj in scene.objects:
         _add_object(world, obj)
     model = spec.compile()

@@ -11,10 +11,17 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
    axis accelerates beyond ``linear_accel_mps2``/``angular_accel_radps2``.
 7. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
 8. ``singularity_slow``/``singularity_halt`` - scale ``1 - (k - slow) / (stop - slow)`` when the
-   Jacobian condition number ``k`` is above ``slow`` and the motion increases it; zero at ``stop``.
-   The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first: the condition
-   number of a mixed-unit Jacobian depends on the unit of length, and at the xArm-6's 0.3 m links this
-   makes a well-conditioned pose read about 15 (36 in raw metres at the scenes' start pose).
+   Jacobian condition number ``k`` is above ``slow`` and the command moves toward the singularity; zero
+   at ``stop``. The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first:
+   the condition number of a mixed-unit Jacobian depends on the unit of length, and at the xArm-6's
+   0.3 m links this makes a well-conditioned pose read about 15. "Toward" is MoveIt Servo's test: the
+   weakest output direction ``u`` of the Jacobian (its smallest singular value), signed so that a
+   small joint step along ``J+ u`` raises ``k``; the command moves toward the singularity when its
+   share along ``u`` (``u . t / |t|``, in the normalised twist space) exceeds
+   ``singularity_share``. A command with (almost) no share along ``u`` needs none of the motion the
+   singularity takes away, and passes: the xArm-6 crosses its wrist singularity (joint 5 = 0) in a
+   vertical plane this way, pitching or translating, with small joint speeds. The dead band (MoveIt
+   uses 0) keeps joystick noise from toggling the halt.
 9. ``joint_bound``   - a joint within ``joint_margin_rad`` of a bound and moving toward it halts the
    command (and a joint speed above its limit scales the command).
 
@@ -54,6 +61,7 @@ class SafetyCode(str, Enum):
 
 
 _SEVERITY = {c: i for i, c in enumerate(SafetyCode)}
+_JOINT_CODES = {SafetyCode.SINGULARITY_SLOW, SafetyCode.SINGULARITY_HALT, SafetyCode.JOINT_BOUND}
 ZERO = np.zeros(6)
 
 
@@ -68,6 +76,15 @@ class SafetyResult:
     def status(self) -> SafetyCode:
         """The most severe code (``ok`` when no stage acted)."""
         return max(self.codes, key=_SEVERITY.__getitem__, default=SafetyCode.OK)
+
+    def refuses(self, requested: FloatArray, fraction: float = 0.1) -> bool:
+        """True when a joint stage (singularity, joint bound) let through less than ``fraction`` of the
+        ``requested`` twist (m/s, rad/s; plain norms: "almost nothing moved" needs no unit balance).
+        What a user sees as "the arm will not go there"."""
+        if not set(self.codes) & _JOINT_CODES:
+            return False
+        asked = float(np.linalg.norm(requested))
+        return asked > 0.0 and float(np.linalg.norm(self.twist)) < fraction * asked
 
 
 class SafetyPipeline:
@@ -164,12 +181,33 @@ class SafetyPipeline:
             t[:3] = clipped
         return t
 
-    def _condition(self, q: FloatArray) -> float:
-        """Condition number of the length-normalised Jacobian at ``q`` (see stage 8)."""
+    def _normalised_jacobian(self, q: FloatArray) -> FloatArray:
+        """The Jacobian at ``q`` with its linear rows divided by ``characteristic_length_m`` (stage 8)."""
         assert self.kinematics is not None
         jac = np.array(self.kinematics.jacobian(q), dtype=float)
         jac[:3] /= self.cfg.characteristic_length_m
-        return float(np.linalg.cond(jac))
+        return jac
+
+    def _condition(self, q: FloatArray) -> float:
+        """Condition number of the length-normalised Jacobian at ``q`` (see stage 8)."""
+        return float(np.linalg.cond(self._normalised_jacobian(q)))
+
+    def singularity_share(self, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
+        """``(k, share)``: the condition number at ``q`` (rad) and the share of ``twist`` (m/s, rad/s)
+        along the weakest output direction, signed positive toward the singularity (stage 8)."""
+        jac = self._normalised_jacobian(q)
+        u_mat, sing, _ = np.linalg.svd(jac)
+        kappa = float(sing[0] / sing[-1]) if sing[-1] > 0 else float("inf")
+        u = u_mat[:, -1]
+        # Which way along u is "toward"? A small joint step realising +u: does k grow?
+        probe = np.linalg.pinv(jac) @ u
+        step = 0.01 / max(float(np.max(np.abs(probe))), 1e-12)  # at most 0.01 rad per joint
+        if np.linalg.cond(self._normalised_jacobian(q + step * probe)) < kappa:
+            u = -u
+        tn = np.array(twist, dtype=float)
+        tn[:3] /= self.cfg.characteristic_length_m
+        norm = float(np.linalg.norm(tn))
+        return kappa, (float(u @ tn) / norm if norm > 0 else 0.0)
 
     def _joint_stages(self, t: FloatArray, q: FloatArray, codes: list[SafetyCode]) -> FloatArray:
         kin = self.kinematics
@@ -179,9 +217,8 @@ class SafetyPipeline:
         c = self.cfg
         kappa = self._condition(q)
         if kappa > c.singularity_slow:
-            qdot = kin.joint_velocities(q, t)
-            ahead = self._condition(q + qdot * self.dt)
-            if ahead > kappa:  # moving toward the singularity
+            kappa, share = self.singularity_share(q, t)
+            if share > c.singularity_share:  # moving toward the singularity
                 if kappa >= c.singularity_stop:
                     codes.append(SafetyCode.SINGULARITY_HALT)
                     return ZERO.copy()

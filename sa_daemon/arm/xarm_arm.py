@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, ConfigError
 from ..geometry import FloatArray, Pose
 from .base import Arm, ArmState, Kinematics, limit_twist
 
@@ -132,7 +132,8 @@ def _default_api_factory(ip: str) -> Callable[[], Any]:
     try:
         from xarm.wrapper import XArmAPI  # type: ignore[import-not-found]
     except ImportError as e:
-        raise ImportError('the xArm backend needs the xArm SDK: pip install ".[xarm]" (xarm-python-sdk)') from e
+        raise ConfigError('arm.backend "xarm" (--arm xarm) needs the xArm SDK: pip install ".[xarm]" '
+                          "(xarm-python-sdk)") from e
     return lambda: XArmAPI(ip, is_radian=True, do_not_open=True)
 
 
@@ -185,6 +186,7 @@ class XArm(Arm):
         self._joints: FloatArray | None = None
         self._gripper_closed = False
         self._poll_t = 0.0
+        self._in_call: tuple[str, float] | None = None  # the SDK call in progress and when it started
         self._next_send_t = 0.0
         self._stats: dict[str, Any] = {
             "error_code": 0,
@@ -228,6 +230,12 @@ class XArm(Arm):
     def read(self) -> ArmState:
         with self._cv:
             assert self._pose is not None  # the constructor guarantees a first pose
+            if self._in_call is not None and self._fault is None and not self._closing:
+                name, since = self._in_call
+                waited = time.monotonic() - since
+                if waited > STALE_POSE_S:  # no reply yet (the SDK waits up to 2 s): the pose is that old
+                    self._latch(f"xArm not answering: no reply to {name} for {waited:.1f} s")
+                    self._zero_req = True  # sent once the I/O thread is free again
             return ArmState(self._pose, self._gripper_closed, self._fault, self._joints)
 
     def command_twist(self, twist: FloatArray) -> None:
@@ -409,10 +417,15 @@ class XArm(Arm):
     def _call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         """One SDK call; raises ``_LinkLost`` on an exception or a code of -1 or 3."""
         t0 = time.monotonic()
+        with self._cv:
+            self._in_call = (name, t0)
         try:
             ret = getattr(self._api, name)(*args, **kwargs)
         except Exception as e:  # the SDK raises on socket errors
             raise _LinkLost(f"{name}: {type(e).__name__}: {e}") from e
+        finally:
+            with self._cv:
+                self._in_call = None
         code = ret[0] if isinstance(ret, (tuple, list)) else ret
         with self._cv:
             self._stats["last_call_s"] = time.monotonic() - t0
@@ -479,13 +492,14 @@ class XArm(Arm):
             q = np.asarray(joints, dtype=float)[:6]
             if q.shape != (6,) or not np.all(np.isfinite(q)):
                 raise ValueError("joint angles")
-        except (ValueError, TypeError, IndexError):
+        except (ValueError, TypeError, IndexError) as e:
             with self._cv:
                 self._stats["poll_errors"] += 1
                 age = time.monotonic() - self._poll_t
                 if self._poll_t and age > STALE_POSE_S and self._fault is None:
                     # Moving on a pose this old would blind the safety pipeline (workspace, joints).
-                    self._latch(f"xArm pose not updated for {age:.1f} s (get_position code {code})")
+                    why = f"get_position code {code}" if code != 0 else f"unusable reply: {e}"
+                    self._latch(f"xArm pose not updated for {age:.1f} s ({why})")
                     self._zero_req = True
             return False
         q.setflags(write=False)

@@ -3,7 +3,11 @@
 The daemon runs in this process for ``--duration`` seconds (tasks back to back); the figures are
 the control loop's rate and period error, overruns (periods > 1.5 x nominal), input-to-command latency
 (a joystick sample's arrival to the arm command computed from it), and the resident memory of the
-daemon and of its planner worker.
+daemon and of its planner worker. With ``--subscribers N --stalled-subscribers M`` a separate process
+holds N subscribers that read everything and M that never read (:mod:`.subscribers`); their figures
+(messages received, state rate, longest gap, messages a stalled one held) join the daemon's, with the
+daemon's ``pub_dropped`` (sends its PUB socket refused). :func:`run_daemon` and :func:`loop_figures`
+also serve ``bench soak``.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,60 +31,109 @@ def rss_mb(pid: int | None = None) -> float:
     return 0.0
 
 
-def run_loop_bench(args: argparse.Namespace) -> dict[str, Any]:
-    """Run the daemon for ``args.duration`` s and return the figures (see module doc)."""
+@dataclass
+class RssSample:
+    """One memory sample of a bench run."""
+
+    t_s: float  # since the daemon started, s
+    daemon_mb: float  # RSS of the daemon's process, MB
+    worker_mb: float  # RSS of the planner worker, MB (0 while there is none)
+    worker_pid: int | None
+
+
+@dataclass
+class BenchRun:
+    """What :func:`run_daemon` leaves: the stopped daemon, its wall time, RSS samples, subscriber figures."""
+
+    daemon: Any
+    duration_s: float
+    rss: list[RssSample] = field(default_factory=list)
+    subscribers: dict[str, Any] = field(default_factory=dict)
+
+
+def run_daemon(args: argparse.Namespace, sample_every_s: float = 1.0) -> BenchRun:
+    """Run the daemon of ``args`` in this process for ``args.duration`` s (tasks back to back), sampling
+    RSS every ``sample_every_s`` s, with ``args.subscribers`` reading and ``args.stalled_subscribers``
+    never-reading subscribers in another process when given (see :mod:`.subscribers`)."""
+    import asyncio
+
     from ..runtime.rate import new_event_loop
     from ..runtime.verbs import build_daemon
+    from .subscribers import SubscriberSwarm
 
     daemon = build_daemon(args)
     daemon.opts.exit_when_done = False
-    worker_rss: list[float] = []
+    run = BenchRun(daemon, 0.0)
+    n_read, n_stalled = getattr(args, "subscribers", 0) or 0, getattr(args, "stalled_subscribers", 0) or 0
+    swarm = SubscriberSwarm(daemon.opts.pub, n_read, n_stalled) if n_read or n_stalled else None
+
+    async def sample() -> None:
+        while True:
+            w = daemon.worker
+            pid = w.pid if w is not None and w.pid else None
+            run.rss.append(RssSample(round(daemon.now(), 3), rss_mb(), rss_mb(pid) if pid else 0.0, pid))
+            await asyncio.sleep(sample_every_s)
 
     async def main() -> int:
-        import asyncio
-
-        async def sample() -> None:
-            while True:
-                await asyncio.sleep(1.0)
-                if daemon.worker is not None and daemon.worker.pid:
-                    worker_rss.append(rss_mb(daemon.worker.pid))
-
         s = asyncio.create_task(sample())
         try:
             return await daemon.run()
         finally:
             s.cancel()
 
+    if swarm is not None:
+        swarm.start()
     loop = new_event_loop()
     t0 = time.monotonic()
     try:
         loop.run_until_complete(main())
     finally:
         loop.close()
+        run.duration_s = time.monotonic() - t0
+        if swarm is not None:
+            run.subscribers = swarm.stop()
+    return run
+
+
+def loop_figures(run: BenchRun) -> dict[str, Any]:
+    """The figures of a finished :class:`BenchRun` (see module doc)."""
+    daemon = run.daemon
     figs = daemon.loop_figures()
-    nominal = daemon.rates["control"].dt
+    control = daemon.rates["control"]
+    publish = daemon.rates.get("publish")
     return {
-        "duration_s": round(time.monotonic() - t0, 3),
+        "duration_s": round(run.duration_s, 3),
         "arm": daemon.opts.arm,
         "method": daemon.method,
-        "control_hz_nominal": 1.0 / nominal,
+        "control_hz_nominal": 1.0 / control.dt,
         "rate_hz": figs.get("rate_hz", 0.0),
         "period_err_ms_p50": figs.get("period_err_ms_p50", 0.0),
         "period_err_ms_p99": figs.get("period_err_ms_p99", 0.0),
         "period_err_ms_max": figs.get("period_err_ms_max", 0.0),
         "overrun_fraction": figs.get("overrun_fraction", 0.0),
+        "overruns": control.stats.overruns,
+        "control_ticks": control.stats.ticks,
         "input_to_command_ms_p50": figs["input_to_command_ms_p50"],
         "input_to_command_ms_p99": figs["input_to_command_ms_p99"],
         "control_work_ms_p50": figs["control_work_ms_p50"],
         "control_work_ms_p99": figs["control_work_ms_p99"],
         "rss_mb": rss_mb(),
-        "worker_rss_mb": max(worker_rss) if worker_rss else 0.0,
+        "worker_rss_mb": max((s.worker_mb for s in run.rss), default=0.0),
         "plans": figs["plans"],
         "planner_restarts": figs["planner_restarts"],
         "tasks_done": len(figs["tasks_done"]),
         "tasks_succeeded": sum(1 for d in figs["tasks_done"] if d["success"]),
+        # One state message per publish tick once running (the tick count starts at READY).
+        "state_messages_published": publish.stats.ticks if publish is not None else 0,
+        "pub_dropped": daemon.server.dropped if daemon.server is not None else 0,
+        "subscribers": run.subscribers,
         "loops": figs["loops"],
     }
+
+
+def run_loop_bench(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the daemon for ``args.duration`` s and return the figures (see module doc)."""
+    return loop_figures(run_daemon(args))
 
 
 def format_loop(f: dict[str, Any]) -> str:
@@ -96,7 +150,24 @@ def format_loop(f: dict[str, Any]) -> str:
         ("planner worker RSS", f"{f['worker_rss_mb']:.0f} MB", "<= 300 MB"),
         ("plans / restarts", f"{f['plans']} / {f['planner_restarts']}", ""),
         ("tasks done / succeeded", f"{f['tasks_done']} / {f['tasks_succeeded']}", ""),
+        ("states published / PUB sends refused", f"{f['state_messages_published']} / {f['pub_dropped']}", ""),
+        *subscriber_rows(f["subscribers"]),
     ]
     w = max(len(r[0]) for r in rows)
     head = f"bench loop: {f['arm']} arm, {f['method']}, {f['duration_s']:.1f} s"
     return "\n".join([head] + [f"  {a:<{w}}  {b:>14}  {c}" for a, b, c in rows])
+
+
+def subscriber_rows(sub: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """Table rows of the subscriber load's figures (none without a load)."""
+    if not sub:
+        return []
+    if "error" in sub:
+        return [("subscribers", sub["error"], "")]
+    return [
+        ("subscribers reading / stalled", f"{sub['subscribers']} / {sub['stalled_subscribers']}", ""),
+        ("reader messages min / max", f"{sub['reader_messages_min']} / {sub['reader_messages_max']}", ""),
+        ("reader state rate min", f"{sub['reader_state_hz_min']:.2f} Hz", ""),
+        ("reader state gap max", f"{sub['reader_state_gap_ms_max']:.1f} ms", ""),
+        ("stalled: messages held", " ".join(str(n) for n in sub["stalled_messages_held"]) or "-", ""),
+    ]

@@ -50,11 +50,20 @@ def smooth_deadzone(v: float, dz: float) -> float:
     return 0.0 if a <= dz else float(np.sign(v)) * (a - dz) / (1.0 - dz)
 
 
-def _code(name: str, kind: str) -> int:
+def _code(name: str, kind: str, key: str = "joystick") -> int:
     code = ecodes.ecodes.get(name)
     if code is None or not name.startswith(kind):
-        raise ValueError(f"joystick: {name!r} is not an evdev {kind} code")
+        raise ValueError(f"{key}: {name!r} is not an evdev {kind} code")
     return int(code)
+
+
+def check_codes(cfg: JoystickConfig) -> None:
+    """Refuse (``ValueError`` naming the key) an axis or button name that is not an evdev code of its kind;
+    the daemon checks this before it starts anything, since no device could ever match such a config."""
+    for name in cfg.axes:
+        _code(name, "ABS_", "joystick.axes")
+    for b in Button:
+        _code(getattr(cfg, f"button_{b.value}"), "BTN_", f"joystick.button_{b.value}")
 
 
 class JoystickMapper:
@@ -116,6 +125,7 @@ class EvdevJoystick:
         on_button: Callable[[Button], None],
         on_link: Callable[[bool, str], None],
     ) -> None:
+        check_codes(cfg)
         self.cfg = cfg
         self.on_axes, self.on_button, self.on_link = on_axes, on_button, on_link
         self.mapper: JoystickMapper | None = None

@@ -3,6 +3,11 @@
 PUB never blocks: each send is ``NOBLOCK`` with a small high-water mark, so a slow or absent subscriber
 loses messages instead of slowing a loop. The command socket is a ROUTER so that any number of REQ
 clients can talk to it; each request gets exactly one reply, in the REQ envelope it came with.
+
+Security (``docs/protocol.md``, section 5): the command socket binds to a non-loopback endpoint only
+with CURVE (:mod:`.security`); then a ZAP authenticator, started before the first bind and stopped in
+:meth:`ZmqServer.close`, admits only the configured client keys. The PUB socket never reads what a
+peer sends, so exposing it cannot expose commands.
 """
 
 from __future__ import annotations
@@ -14,8 +19,17 @@ from typing import Any
 
 import zmq
 import zmq.asyncio
+from zmq.auth.thread import ThreadAuthenticator
 
 from . import protocol
+from .security import (
+    AllowList,
+    ServerCurve,
+    apply_server,
+    exposure_error,
+    is_loopback,
+    start_authenticator,
+)
 
 log = logging.getLogger(__name__)
 
@@ -23,13 +37,26 @@ Handler = Callable[[protocol.Request], dict[str, Any]]
 
 
 class ZmqServer:
-    """Bind ``pub`` and ``cmd`` endpoints; :meth:`serve` answers commands with ``handler``."""
+    """Bind ``pub`` and ``cmd`` endpoints; :meth:`serve` answers commands with ``handler``.
 
-    def __init__(self, pub: str, cmd: str, max_request_bytes: int = 65536, max_json_depth: int = 8) -> None:
+    ``curve``: CURVE keys and allowed clients (``None``: no CURVE, and ``cmd`` must be loopback, else
+    :class:`~sa_daemon.config.ConfigError` naming ``zmq.cmd`` before any socket exists).
+    """
+
+    def __init__(self, pub: str, cmd: str, max_request_bytes: int = 65536, max_json_depth: int = 8,
+                 curve: ServerCurve | None = None) -> None:
+        err = exposure_error(cmd, curve)
+        if err is not None:
+            raise err
         self.ctx = zmq.asyncio.Context()
+        self.curve = curve
+        self.allow: AllowList | None = None
+        self.auth: ThreadAuthenticator | None = None
         self.max_request_bytes = max_request_bytes
         self.max_json_depth = max_json_depth
-        self.dropped = 0  # messages a full PUB queue refused
+        # Sends libzmq refused (zmq.Again). A PUB socket drops a slow subscriber's messages silently at
+        # its high-water mark and never refuses, so this stays 0 unless the socket itself cannot send.
+        self.dropped = 0
         self.requests = 0
         self.refused = 0
         self.pub = self.ctx.socket(zmq.PUB)
@@ -41,16 +68,26 @@ class ZmqServer:
         # answers anything between max_request_bytes and this with a reason).
         self.cmd.setsockopt(zmq.MAXMSGSIZE, 16 * max_request_bytes)
         try:
+            if curve is not None:
+                self.allow = AllowList(curve.allowed)
+                # Before any bind: libzmq admits every CURVE client while no ZAP handler is running.
+                self.auth = start_authenticator(self.ctx, self.allow)
+                apply_server(self.cmd, curve.keys)
+                if curve.pub:
+                    apply_server(self.pub, curve.keys)
             self.pub.bind(pub)
             self.cmd.bind(cmd)
-        except zmq.ZMQError as e:
+        except (zmq.ZMQError, RuntimeError) as e:
             self.close()
             raise OSError(f"cannot bind ZeroMQ endpoint ({pub}, {cmd}): {e}") from None
+        if (curve is None or not curve.pub) and not is_loopback(pub):
+            log.warning("zmq.pub %s is reachable from other machines without CURVE: anyone there can read the "
+                        "state stream (but never command: a PUB socket reads nothing)", pub)
         self.pub_endpoint = self.pub.getsockopt_string(zmq.LAST_ENDPOINT)
         self.cmd_endpoint = self.cmd.getsockopt_string(zmq.LAST_ENDPOINT)
 
     def publish(self, topic: bytes, obj: dict[str, Any]) -> None:
-        """Send ``[topic, JSON]`` without ever blocking (dropped when the queue is full)."""
+        """Send ``[topic, JSON]`` without ever blocking (a full subscriber queue loses it, silently)."""
         try:
             self.pub.send_multipart([topic, protocol.encode(obj)], flags=zmq.NOBLOCK)
         except zmq.Again:
@@ -86,4 +123,7 @@ class ZmqServer:
         subscriber cannot hold the shutdown longer than that)."""
         self.pub.close(linger=int(linger_s * 1000))
         self.cmd.close(linger=0)
+        if self.auth is not None:  # after the sockets it guards, before the context
+            self.auth.stop()
+            self.auth = None
         self.ctx.term()

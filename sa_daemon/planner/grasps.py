@@ -1,7 +1,8 @@
 """Grasp poses: analytic generation from primitive shapes, grasp-type classification and reachability.
 
-Frames (see ``docs/scenes.md``): the arm base frame has x forward, y left, z up, the table top at z = 0
-and the shoulder at (0, 0, 0.267) m. A grasp is a :class:`~sa_daemon.geometry.Pose` of the tool frame:
+Frames (see ``docs/scenes.md``): the arm base frame has x forward, y left, z up, the shoulder at
+(0, 0, 0.267) m; the table top is at ``table_z`` (m, base frame; a scene setting, 0 unless given), and the
+heights the reach filter and the side-grasp pitch look at are taken above it. A grasp is a :class:`~sa_daemon.geometry.Pose` of the tool frame:
 z is the approach direction (from the gripper into the object), y the fingers' closing axis,
 x = y cross z, and the position is the TCP between the fingertips. Lengths in m, angles in rad.
 
@@ -30,17 +31,17 @@ SHOULDER_M: FloatArray = np.array([0.0, 0.0, 0.267])
 """Shoulder point (m) in the base frame, centre of the reachability sphere."""
 REACH_M = 0.70
 """Largest wrist-point distance (m) from the shoulder accepted by :func:`is_reachable`."""
-MIN_WRIST_Z_M = 0.03
-"""Lowest wrist-point height (m) accepted by :func:`is_reachable`."""
-MIN_TCP_Z_M = 0.005
-"""Lowest TCP height (m) accepted by :func:`is_reachable`."""
+MIN_WRIST_HEIGHT_M = 0.03
+"""Lowest wrist-point height above the table top (m) accepted by :func:`is_reachable`."""
+MIN_TCP_HEIGHT_M = 0.005
+"""Lowest TCP height above the table top (m) accepted by :func:`is_reachable`."""
 CONE_RAD = math.radians(30.0)
 """Half-angle of the top and side approach cones (rad)."""
 
 GRASP_DEPTH_M = 0.02  # TCP this far below a top surface / inside a face (at most half the extent)
 RIM_DEPTH_M = 0.015  # rim grasps: TCP this far below the rim
 RIM_INSET_M = 0.003  # rim grasps: TCP this far inside the outer radius (the middle of the wall)
-LOW_TCP_Z_M = 0.05  # side grasps with a TCP lower than this approach pitched down ...
+LOW_TCP_HEIGHT_M = 0.05  # side grasps with a TCP lower than this above the table approach pitched down ...
 SIDE_PITCH_RAD = math.radians(25.0)  # ... by this angle, keeping the wrist off the table
 TALL_M = 0.12  # side grasps of objects taller than this at two heights instead of one
 LONG_M = 0.10  # grasps along objects longer than this at three points instead of one
@@ -116,14 +117,16 @@ def wrist_point(pose: Pose) -> FloatArray:
     return pose.position - TCP_OFFSET_M * pose.rotation[:, 2]
 
 
-def is_reachable(pose: Pose) -> bool:
-    """Crude reachability: wrist point within 0.70 m of the shoulder (0, 0, 0.267), wrist z >= 0.03 m
-    and TCP z >= 0.005 m. One function so an IK-based check can replace it."""
+def is_reachable(pose: Pose, table_z: float = 0.0) -> bool:
+    """Crude reachability: wrist point within 0.70 m of the shoulder (0, 0, 0.267) and at least 0.03 m
+    above the table top at ``table_z`` (m, base frame), TCP at least 0.005 m above it. The sphere
+    is the arm's reach; the heights keep the wrist and fingers off the table. One function so an
+    IK-based check can replace it."""
     w = wrist_point(pose)
     return bool(
         np.linalg.norm(w - SHOULDER_M) <= REACH_M
-        and w[2] >= MIN_WRIST_Z_M
-        and pose.position[2] >= MIN_TCP_Z_M
+        and w[2] >= table_z + MIN_WRIST_HEIGHT_M
+        and pose.position[2] >= table_z + MIN_TCP_HEIGHT_M
     )
 
 
@@ -177,9 +180,10 @@ def _heights(centre_z: float, height: float) -> list[float]:
     return [bottom + height * (i + 1) / (n + 1) for i in range(n)]
 
 
-def _pitch(tcp_z: float) -> float:
-    """Downward pitch (rad) of a side approach: 25 deg when the TCP is low (still a side grasp), else 0."""
-    return SIDE_PITCH_RAD if tcp_z < LOW_TCP_Z_M else 0.0
+def _pitch(tcp_height: float) -> float:
+    """Downward pitch (rad) of a side approach: 25 deg when the TCP is low above the table (still a side
+    grasp), else 0. Candidates are generated with the table top at z = 0, so heights are z."""
+    return SIDE_PITCH_RAD if tcp_height < LOW_TCP_HEIGHT_M - _TOL else 0.0  # tolerance: lifted frames round
 
 
 def _side_approach(direction: FloatArray, tcp_z: float) -> FloatArray:
@@ -274,12 +278,13 @@ def generate_grasps(
     yaw: float,
     grasp_type: GraspType | str,
     rim: bool = False,
+    table_z: float = 0.0,
 ) -> list[Pose]:
     """Reachable grasp poses of one type on a primitive, each followed by its 180-deg flip.
 
     ``shape``: ``box`` (``size`` = full extents [x, y, z] in the object frame, turned by ``yaw`` rad about
     base z), ``cylinder`` (``[radius, height]``, upright) or ``sphere`` (``[radius]``); ``position`` is the
-    shape's centre (m, base frame). Top grasps of a cylinder with ``rim`` or wider than the gripper pinch
+    shape's centre (m, base frame) and ``table_z`` the table top's height (m, base frame). Top grasps of a cylinder with ``rim`` or wider than the gripper pinch
     its wall at 8 points round the rim. At most 16 poses, in a deterministic order.
 
     Raises :class:`GraspInfeasibleError` if no pose of the type fits the gripper, and
@@ -292,9 +297,15 @@ def generate_grasps(
     yaw = float(yaw)
     if not math.isfinite(yaw):
         raise ValueError(f"yaw must be finite (rad), got {yaw}")
+    table_z = float(table_z)
+    if not math.isfinite(table_z):
+        raise ValueError(f"table_z must be finite (m), got {table_z}")
     fine = gt not in (GraspType.TOP, GraspType.SIDE)
-    cands = _top_candidates(shape, s, c, yaw, rim) if gt.is_top else _side_candidates(shape, s, c, yaw)
-    typed = [p for p in cands if classify_grasp(p, fine) == gt]
+    # Generated in a frame with the table top at z = 0 (only _pitch looks at heights), then lifted back.
+    lift = np.array([0.0, 0.0, table_z])
+    c_table = c - lift
+    cands = _top_candidates(shape, s, c_table, yaw, rim) if gt.is_top else _side_candidates(shape, s, c_table, yaw)
+    typed = [Pose(p.position + lift, p.quat_wxyz) for p in cands if classify_grasp(p, fine) == gt]
     if not typed:
         raise GraspInfeasibleError(
             f"cannot generate {gt.value} grasps for a {shape} of size {s.tolist()} m at yaw {yaw:.3f} rad: "
@@ -302,11 +313,11 @@ def generate_grasps(
             f"the {GRIPPER_MAX_OPENING_M} m gripper opening"
             + (" (set rim = true for containers)" if gt.is_top and shape == "cylinder" else "")
         )
-    reachable = [p for p in typed if is_reachable(p)]
+    reachable = [p for p in typed if is_reachable(p, table_z)]
     if not reachable:
         raise UnreachableGraspError(
             f"no reachable {gt.value} grasp pose for the {shape} at {c.tolist()} m: each needs its wrist "
-            f"point within {REACH_M} m of the shoulder {SHOULDER_M.tolist()}, wrist z >= {MIN_WRIST_Z_M} m "
-            f"and TCP z >= {MIN_TCP_Z_M} m"
+            f"point within {REACH_M} m of the shoulder {SHOULDER_M.tolist()}, the wrist >= {MIN_WRIST_HEIGHT_M} m "
+            f"and the TCP >= {MIN_TCP_HEIGHT_M} m above the table top (z = {table_z} m)"
         )
     return [q for p in _thin(reachable, MAX_BASE_GRASPS) for q in (p, flip_grasp(p))]

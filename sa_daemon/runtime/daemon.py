@@ -42,6 +42,7 @@ from ..io import protocol
 from ..io.notify import Notifier
 from ..io.protocol import TOPIC_EVENT, TOPIC_STATE, Request, RequestError
 from ..io.recorder import Recorder
+from ..io.security import server_curve
 from ..io.server import ZmqServer
 from ..planner.actions import NO_ASSIST, Action, ActionKind, Mode, axes_to_twist
 from ..planner.belief import Belief
@@ -51,10 +52,14 @@ from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
 from ..speech.speaker import Speaker, Spoken, question_text
-from .rate import FixedRate, PeriodStats
+from .rate import FixedRate, PeriodStats, Ring
 from .siminput import SimInput
 
 log = logging.getLogger("sa_daemon")
+
+STATS_KEEP = 20000
+"""Latency and tick-work samples kept for percentiles (200 s at 100 Hz)."""
+
 
 
 @dataclass
@@ -88,6 +93,9 @@ class Daemon:
 
     def __init__(self, cfg: Config, opts: RunOptions, arm_factory: Callable[[], Arm] | None = None) -> None:
         self.cfg, self.opts = cfg, opts
+        # Before anything starts: a non-loopback command endpoint without CURVE, or a missing key file,
+        # is a ConfigError naming the key (exit 2), never a half-started daemon.
+        self.curve = server_curve(cfg.zmq, opts.cmd)
         self.model = SharedAutonomyModel(cfg)
         self.method = opts.method
         self._arm_factory = arm_factory or (lambda: make_arm(opts.arm, opts.scene, cfg))
@@ -115,8 +123,8 @@ class Daemon:
         self.fault_reported: str | None = None
         self.t0 = time.monotonic()
         self.rates: dict[str, FixedRate] = {}
-        self.latency_ms: list[float] = []
-        self.tick_work_ms: list[float] = []
+        self.latency_ms = Ring(STATS_KEEP)  # input sample -> arm command (ms)
+        self.tick_work_ms = Ring(STATS_KEEP)  # control tick's own work (ms)
         self.tasks_done: list[dict[str, Any]] = []
         self.events_sent = 0
         self._stop_event: asyncio.Event | None = None
@@ -200,7 +208,10 @@ class Daemon:
     def on_joystick_link(self, up: bool, text: str) -> None:
         self.input_connected = up
         if not up:
+            # Stale at once (not a fresh zero sample): the safety pipeline zeroes the whole command at the
+            # next control tick, assistance included, instead of ramping down or waiting for the timeout.
             self.axes = np.zeros(3)
+            self.t_input = -math.inf
         self.event("input_back" if up else "input_lost", detail=text)
 
     def set_gripper(self, closed: bool) -> None:
@@ -421,7 +432,8 @@ class Daemon:
         pose = self.arm_state.pose
         if self.question is not None and mono - self.question.asked_at >= self.cfg.sim_user.answer_delay_s:
             self.answer(sim.answer(self.question.target), source="sim")
-        s = sim.sample(pose, listening=self.question is not None)
+        s = sim.sample(pose, listening=self.question is not None,
+                       blocked=self.safety_result.refuses(self.command.total_twist))
         timed_out = self.now() - sim.task_started > self.cfg.sim_user.timeout_s
         if s.close or timed_out:
             self.set_axes(np.zeros(3), mono)
@@ -487,8 +499,6 @@ class Daemon:
             self._heartbeat["control"] = mono
             self._control_tick(mono, dt)
             self.tick_work_ms.append((time.monotonic() - mono) * 1e3)
-            if len(self.tick_work_ms) > 40000:
-                del self.tick_work_ms[:20000]
 
     def _control_tick(self, mono: float, dt: float) -> None:
         arm, safety = self.arm, self.safety
@@ -518,8 +528,6 @@ class Daemon:
         if fresh and self.input_seq != self._commanded_seq:
             self._commanded_seq = self.input_seq
             self.latency_ms.append((sent - self.t_input) * 1e3)
-            if len(self.latency_ms) > 40000:
-                del self.latency_ms[:20000]
         if not arm.realtime:
             arm.step(dt)
         self.command, self.safety_result = cmd, result
@@ -674,6 +682,13 @@ class Daemon:
 
     def _start_components(self) -> None:
         cfg, opts = self.cfg, self.opts
+        # The joystick's codes first: a config no device could match is refused before anything starts.
+        if opts.input == "evdev":
+            from ..io.joystick import EvdevJoystick
+
+            self.joystick = EvdevJoystick(cfg.joystick, self.set_axes, self.on_button, self.on_joystick_link)
+        elif opts.input != "sim":
+            raise ValueError(f"unknown input backend {opts.input!r} (sim or evdev)")
         self.arm = self._arm_factory()
         self.arm_state = self.arm.read()
         # One epoch for every loop; the others are phased between control ticks (a quarter and a half
@@ -688,9 +703,17 @@ class Daemon:
             "publish": FixedRate(cfg.runtime.publish_hz, spin_s=0.0, start=t0 + 0.6 * ctl),
         }
         self.safety = SafetyPipeline(cfg.safety, cfg.limits, control.dt, self.arm.kinematics)
-        self.server = ZmqServer(opts.pub, opts.cmd, cfg.zmq.max_request_bytes, cfg.zmq.max_json_depth)
+        try:
+            self.server = ZmqServer(opts.pub, opts.cmd, cfg.zmq.max_request_bytes, cfg.zmq.max_json_depth,
+                                    curve=self.curve)
+        except OSError as e:
+            raise OSError(f"zmq.pub / zmq.cmd (--pub / --cmd): {e}") from None
         if opts.record:
-            self.recorder = Recorder(opts.record.replace("{time}", time.strftime("%Y%m%d-%H%M%S")), cfg.record.flush_s)
+            path = opts.record.replace("{time}", time.strftime("%Y%m%d-%H%M%S"))
+            try:
+                self.recorder = Recorder(path, cfg.record.flush_s)
+            except OSError as e:
+                raise OSError(f"record.path (--record) {path}: cannot write: {e.strerror or e}") from None
         if cfg.speech.enabled:
             self.speaker = Speaker(cfg.speech, on_done=self._on_spoken)
         self.worker = PlannerWorker(cfg.model_dump(mode="json"), self._on_plan, self._on_worker_exit)
@@ -701,12 +724,6 @@ class Daemon:
             self.sim = SimInput(opts.scene, opts.tasks, cfg, 1.0 / cfg.runtime.belief_hz, opts.seed)
             task = self.sim.next_task(self.arm_state.pose, self.now())
             self.event("task", task=task)
-        elif opts.input == "evdev":
-            from ..io.joystick import EvdevJoystick
-
-            self.joystick = EvdevJoystick(cfg.joystick, self.set_axes, self.on_button, self.on_joystick_link)
-        else:
-            raise ValueError(f"unknown input backend {opts.input!r} (sim or evdev)")
 
     async def _wait_ready(self) -> None:
         """Wait (without blocking the loops) for the planner worker and the speech engine."""
@@ -742,6 +759,7 @@ class Daemon:
             self.recorder.close()
         if self.server is not None:
             self.server.close()
+            self.server = None  # a late callback (an utterance ended by the speaker's close) publishes nothing
         self.notifier.close()
 
     # -- figures -----------------------------------------------------------------------------------------
@@ -749,8 +767,8 @@ class Daemon:
     def loop_figures(self) -> dict[str, Any]:
         """Loop statistics for ``bench loop`` and the closing log line."""
         ctl = self.rates["control"].stats.summary() if "control" in self.rates else {}
-        lat = np.asarray(self.latency_ms) if self.latency_ms else np.zeros(1)
-        work = np.asarray(self.tick_work_ms) if self.tick_work_ms else np.zeros(1)
+        lat = self.latency_ms.values() if len(self.latency_ms) else np.zeros(1)
+        work = self.tick_work_ms.values() if len(self.tick_work_ms) else np.zeros(1)
         return {
             **ctl,
             "input_to_command_ms_p50": float(np.percentile(lat, 50)),

@@ -8,6 +8,7 @@ from collections import deque
 from typing import Any
 
 from ..io.client import subscribe
+from ..io.security import ClientCurve
 
 BAR = 30  # characters of a full belief bar
 
@@ -52,14 +53,18 @@ def render(state: dict[str, Any], events: deque[str]) -> str:
     return "\n".join(lines)
 
 
-def monitor(endpoint: str, duration_s: float | None = None, once: bool = False) -> int:
-    """Show the stream until interrupted (or ``duration_s``); ``once`` prints a single state."""
+def monitor(endpoint: str, duration_s: float | None = None, once: bool = False,
+            curve: ClientCurve | None = None) -> int:
+    """Show the stream until interrupted (or ``duration_s``); ``once`` prints a single state.
+
+    ``curve``: client keys for a daemon whose PUB stream is CURVE-protected (``zmq.curve_pub``).
+    """
     events: deque[str] = deque(maxlen=8)
     t_end = time.monotonic() + duration_s if duration_s else None
     last = 0.0
     tty = sys.stdout.isatty()
     try:
-        for topic, msg in subscribe(endpoint, timeout_s=5.0):
+        for topic, msg in subscribe(endpoint, timeout_s=5.0, curve=curve):
             if topic == "event":
                 extra = " ".join(f"{k}={v}" for k, v in msg.items() if k not in ("t", "type"))
                 events.append(f"[{msg['t']:7.2f}] {msg['type']} {extra}")

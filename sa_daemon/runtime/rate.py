@@ -30,28 +30,54 @@ def new_event_loop() -> asyncio.AbstractEventLoop:
     return asyncio.SelectorEventLoop(selectors.SelectSelector())
 
 
+class Ring:
+    """The last ``size`` samples in a preallocated float array: memory is constant from the first
+    sample, however long the daemon runs (a soak measures RSS growth; a growing list would show)."""
+
+    def __init__(self, size: int) -> None:
+        if size < 1:
+            raise ValueError("a ring needs room for at least one sample")
+        self._buf = np.zeros(size)
+        self._n = 0
+
+    def append(self, value: float) -> None:
+        self._buf[self._n % self._buf.size] = value
+        self._n += 1
+
+    def values(self) -> np.ndarray:
+        """A copy of the kept samples (oldest first is not guaranteed: they are for statistics)."""
+        return self._buf[: len(self)].copy()
+
+    def clear(self) -> None:
+        self._n = 0
+
+    def __len__(self) -> int:
+        return min(self._n, self._buf.size)
+
+
 @dataclass
 class PeriodStats:
-    """Tick-to-tick periods of one loop (kept in a bounded ring for percentiles)."""
+    """Tick-to-tick periods of one loop (the last ``keep`` in a :class:`Ring`, for percentiles)."""
 
     nominal_s: float
     keep: int = 20000
-    periods_s: list[float] = field(default_factory=list)
+    periods_s: Ring = field(init=False)
     ticks: int = 0
     overruns: int = 0  # periods longer than 1.5 x nominal
     skipped: int = 0  # whole ticks missed because a tick ran late
+
+    def __post_init__(self) -> None:
+        self.periods_s = Ring(self.keep)
 
     def add(self, period_s: float) -> None:
         self.ticks += 1
         if period_s > 1.5 * self.nominal_s:
             self.overruns += 1
         self.periods_s.append(period_s)
-        if len(self.periods_s) > 2 * self.keep:
-            del self.periods_s[: self.keep]
 
     def summary(self) -> dict[str, float]:
         """``rate_hz``, period error percentiles (ms) and the overrun fraction."""
-        p = np.asarray(self.periods_s[-self.keep :])
+        p = self.periods_s.values()
         if p.size == 0:
             return {"rate_hz": 0.0, "period_err_ms_p50": 0.0, "period_err_ms_p99": 0.0, "period_err_ms_max": 0.0,
                     "overrun_fraction": 0.0, "skipped": float(self.skipped)}

@@ -57,10 +57,11 @@ class SimInput:
         self.task_started = now
         return task
 
-    def sample(self, pose: Pose, listening: bool) -> SimSample:
-        """The user's stick at this instant (call once per belief tick)."""
+    def sample(self, pose: Pose, listening: bool, blocked: bool = False) -> SimSample:
+        """The user's stick at this instant (call once per belief tick); ``blocked``: the safety
+        pipeline halted the last command (the user is told, as the ``safety`` field tells a UI)."""
         assert self.user is not None, "next_task() first"
-        inp = self.user.act(pose, listening=listening)
+        inp = self.user.act(pose, listening=listening, blocked=blocked)
         return SimSample(np.asarray(inp.axes, dtype=float), inp.mode, bool(inp.close))
 
     def answer(self, target: str) -> bool:

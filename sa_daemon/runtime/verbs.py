@@ -1,4 +1,4 @@
-"""The daemon's command-line verbs: ``run``, ``monitor``, ``answer``, ``plot`` and ``bench loop``."""
+"""The daemon's command-line verbs: ``run``, ``monitor``, ``answer``, ``keygen``, ``plot``, ``bench loop`` and ``bench soak``."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..arm.factory import JOINTED_BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
 from ..planner.scene import builtin_scene_names, load_scene
 
@@ -56,6 +57,11 @@ def build_daemon(args: argparse.Namespace) -> Any:
     tasks = args.task or ([DEFAULT_TASK] if DEFAULT_TASK in scene.targets else scene.targets[:1])
     for t in tasks:
         scene.goal(t)  # an unknown task is refused before anything starts (KeyError naming it)
+    if cfg.arm.backend in JOINTED_BACKENDS:  # the goals keep the poses the xArm-6 reaches (arm/reach.py)
+        from ..arm.kinematics import ArmKinematics
+        from ..arm.reach import reachable_scene
+
+        scene = reachable_scene(scene, ArmKinematics(), cfg.safety.joint_margin_rad)
     opts = RunOptions(
         scene=scene, arm=cfg.arm.backend, input=args.input, tasks=tasks, method=cfg.method,
         pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=args.duration, record=cfg.record.path or None,
@@ -91,18 +97,47 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_answer(args: argparse.Namespace) -> int:
     from ..io.client import request
+    from ..io.security import client_curve
 
     cfg = load_config(args.config)
-    reply = request(args.cmd or cfg.zmq.cmd, {"cmd": "answer", "value": args.value}, timeout_s=args.timeout)
+    reply = request(args.cmd or cfg.zmq.cmd, {"cmd": "answer", "value": args.value}, timeout_s=args.timeout,
+                    curve=client_curve(cfg.zmq))
     print(json.dumps(reply))
     return 0 if reply.get("ok") else 1
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
+    from ..io.security import client_curve
     from .monitor import monitor
 
     cfg = load_config(args.config)
-    return monitor(args.pub or cfg.zmq.pub, duration_s=args.duration, once=args.once)
+    curve = client_curve(cfg.zmq) if cfg.zmq.curve_pub else None
+    return monitor(args.pub or cfg.zmq.pub, duration_s=args.duration, once=args.once, curve=curve)
+
+
+def cmd_keygen(args: argparse.Namespace) -> int:
+    """Write CURVE keys (``sa_daemon.io.keygen``) and print the config lines that use them."""
+    from ..io.keygen import generate
+
+    if args.clients is not None and args.clients < 0:
+        raise ValueError("keygen --clients: must be 0 or more")
+    names = list(args.client or [])
+    names += [f"client{i}" for i in range(1, (args.clients or 0) + 1)]
+    if args.client is None and args.clients is None:
+        names = ["client1"]
+    res = generate(args.dir, names, force=args.force)
+    q = json.dumps  # a JSON string of a path is a valid TOML string
+    print(f"server key pair {'written' if res.server_created else 'kept'}: {res.server_public} (public), "
+          f"{res.server_secret} (secret, 0600)")
+    for name, secret in res.clients.items():
+        print(f"client {name}: {secret} (secret, 0600); public key allowed as {res.allowed_dir / (name + '.key')}")
+    print("\n# the daemon's config.toml (CURVE on: zmq.cmd may now be e.g. tcp://0.0.0.0:5556)")
+    print(f"[zmq]\ncurve_server_secret = {q(str(res.server_secret))}\ncurve_clients_dir = {q(str(res.allowed_dir))}")
+    for name, secret in res.clients.items():
+        print(f"\n# config.toml of client {name} (sa-daemon answer/monitor; copy its .key_secret to it, nothing else)")
+        print(f"[zmq]\ncurve_client_secret = {q(str(secret))}\ncurve_server_public = {q(str(res.server_public))}")
+    print("\n# revoke a client: delete its allowed_clients/NAME.key and restart the daemon")
+    return 0
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
@@ -116,16 +151,30 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_figures(path: str | None, figs: dict[str, Any]) -> None:
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(figs, indent=2) + "\n")
+        print(f"wrote {path}")
+
+
 def cmd_bench_loop(args: argparse.Namespace) -> int:
     from ..bench.loop import format_loop, run_loop_bench
 
     figs = run_loop_bench(args)
     print(format_loop(figs))
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(figs, indent=2) + "\n")
-        print(f"wrote {args.json}")
+    _write_figures(args.json, figs)
     return 0
+
+
+def cmd_bench_soak(args: argparse.Namespace) -> int:
+    """Exit 0 when every soak criterion passes, 1 when one fails."""
+    from ..bench.soak import format_soak, run_soak
+
+    figs = run_soak(args)
+    print(format_soak(figs))
+    _write_figures(args.json, figs)
+    return 0 if figs["pass"] else 1
 
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
@@ -166,15 +215,41 @@ def add_parsers(sub: Any) -> None:
     a.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the reply")
     a.set_defaults(func=cmd_answer)
 
+    k = sub.add_parser("keygen", help="write CURVE keys for a daemon exposed beyond loopback, print the config")
+    k.add_argument("dir", help="key directory (created; e.g. /etc/sa-daemon/curve)")
+    k.add_argument("--client", action="append", metavar="NAME", help="a client key pair named NAME (repeatable)")
+    k.add_argument("--clients", type=int, metavar="N", help="N client key pairs named client1..clientN (default: 1 unless --client)")
+    k.add_argument("--force", action="store_true", help="replace existing keys (a new server key invalidates "
+                   "every client's curve_server_public)")
+    k.set_defaults(func=cmd_keygen)
+
     pl = sub.add_parser("plot", help="Fig. 4 timeline of a recording (MCAP)")
     pl.add_argument("recording")
     pl.add_argument("--out", help="PNG path (default: next to the recording)")
     pl.set_defaults(func=cmd_plot)
 
 
+def _add_bench_options(p: argparse.ArgumentParser, duration_s: float) -> None:
+    """``run``'s flags plus what ``bench loop`` and ``bench soak`` share: duration, JSON, subscriber load."""
+    add_run_options(p)
+    p.add_argument("--duration", type=float, default=duration_s, help=f"seconds to run (default {duration_s:g})")
+    p.add_argument("--json", help="write the figures to this file")
+    p.add_argument("--subscribers", type=int, default=0, metavar="N",
+                   help="N subscribers in another process that read every message (default 0)")
+    p.add_argument("--stalled-subscribers", type=int, default=0, metavar="M",
+                   help="M subscribers in that process that connect and never read (default 0)")
+
+
 def add_bench_parsers(bsub: Any) -> None:
     bl = bsub.add_parser("loop", help="daemon loop rates, jitter, latency and memory with the sim user")
-    add_run_options(bl)
-    bl.add_argument("--duration", type=float, default=30.0, help="seconds to run (default 30)")
-    bl.add_argument("--json", help="write the figures to this file")
+    _add_bench_options(bl, 30.0)
     bl.set_defaults(func=cmd_bench_loop)
+
+    bs = bsub.add_parser("soak", help="long run with the sim user: RSS growth, overruns, restarts "
+                         "(exit 1 if a criterion fails)")
+    _add_bench_options(bs, 600.0)
+    bs.add_argument("--sample-every", type=float, default=5.0, help="RSS sampling period, s (default 5)")
+    bs.add_argument("--max-growth-pct", type=float, default=5.0,
+                    help="RSS growth after warm-up allowed for the daemon and the worker, %% (default 5)")
+    bs.add_argument("--max-overruns", type=int, default=0, help="control overruns allowed (default 0)")
+    bs.set_defaults(func=cmd_bench_soak)

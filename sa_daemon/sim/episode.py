@@ -20,6 +20,7 @@ import numpy as np
 from ..arm.base import Arm
 from ..arm.factory import make_arm
 from ..arm.kinematic import KinematicArm
+from ..arm.reach import reachable_scene
 from ..config import Config
 from ..geometry import Pose
 from ..planner.actions import NO_ASSIST, Action, ActionKind, Mode
@@ -109,10 +110,12 @@ def run_trial(
     rng = np.random.default_rng(seed)
     model = SharedAutonomyModel(cfg)
     solver = Solver(model)
+    arm = arm_factory(scene, cfg)
+    if arm.kinematics is not None:  # an arm with joints: only the poses it can reach (arm/reach.py)
+        scene = reachable_scene(scene, arm.kinematics, cfg.safety.joint_margin_rad)
     goal = scene.goal(task)
     dt = 1.0 / cfg.eval.control_hz
     user = SimulatedUser(task, desired_pose(goal, scene.start, cfg, rng, pose_choice), cfg.sim_user, cfg.input, rng, dt)
-    arm = arm_factory(scene, cfg)
     belief = model.initial_belief(scene.goals)
     plan_every = max(1, int(round(cfg.planner.period_s / dt)))
     asked: set[str] = set()

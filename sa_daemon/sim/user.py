@@ -5,7 +5,9 @@ time: translate to a pre-grasp point behind the grasp (along the approach axis),
 align the gripper, switch back and translate in. Its command is a saturated proportional twist toward
 where it wants to be, computed from the pose it saw ``reaction_delay_s`` ago, plus Gaussian noise: it
 naturally fights wrong assistance. It re-plans its mode whenever the assistance disturbs the part it is
-not driving. A mode switch costs ``mode_switch_s`` without input; questions are answered truthfully
+not driving. A user whose arm refuses to move on the way to the pre-grasp point (the daemon's safety
+pipeline halts it, e.g. at a wrist singularity, and says so) for ``blocked_rotate_s`` rotates the
+gripper first, as people do, and then translates on. A mode switch costs ``mode_switch_s`` without input; questions are answered truthfully
 (or wrongly with ``answer_error_rate``) after ``answer_delay_s``.
 """
 
@@ -68,6 +70,8 @@ class SimulatedUser:
         self.phase = Phase.APPROACH
         self.mode_changes = 0
         self._switch_left = 0.0
+        self._blocked_s = 0.0  # how long the arm has refused the user's motion (s)
+        self._detour = False  # aligning early because the approach was blocked
         self._seen: deque[Pose] = deque(maxlen=int(round(cfg.reaction_delay_s / dt)) + 1)
         # (error, commanded motion this step) over the persistence window.
         self._errors_seen: deque[tuple[float, float]] = deque(maxlen=max(2, int(round(cfg.persist_window_s / dt))))
@@ -95,6 +99,7 @@ class SimulatedUser:
             self.mode_changes += 1
             self._switch_left = self.cfg.mode_switch_s
             self._errors_seen.clear()
+            self._blocked_s = 0.0
 
     def _push(self, err: FloatArray, gain: float, full: float) -> FloatArray:
         """Axes for error ``err``: saturated proportional, or full deflection when stalled."""
@@ -111,11 +116,13 @@ class SimulatedUser:
         _, dist, rot = self._errors(pose)
         if self.phase is Phase.APPROACH and dist <= c.pregrasp_tolerance_m:
             self.phase = Phase.ALIGN if rot > c.rotation_done_rad else Phase.INSERT
+        elif self.phase is Phase.APPROACH and self._blocked_s >= c.blocked_rotate_s and rot > c.rotation_done_rad:
+            self.phase, self._detour = Phase.ALIGN, True  # blocked on the way: turn the gripper first
         elif self.phase is Phase.ALIGN and rot <= c.rotation_done_rad:
-            self.phase = Phase.INSERT
+            self.phase, self._detour = Phase.INSERT, False
         elif self.phase is Phase.INSERT and rot > c.close_rotation_rad:
             self.phase = Phase.ALIGN  # the assistance turned the gripper away: fix it first
-        if self.phase is not Phase.APPROACH:
+        if self.phase is not Phase.APPROACH and not self._detour:
             # Pushed far off the approach line: back out to the pre-grasp point.
             off = float(np.linalg.norm(pose.position - self.desired.position))
             if off > c.pregrasp_standoff_m + 3 * c.pregrasp_tolerance_m:
@@ -123,9 +130,11 @@ class SimulatedUser:
         want = Mode.ROTATION if self.phase is Phase.ALIGN else Mode.TRANSLATION
         self._switch(want)
 
-    def act(self, pose: Pose, listening: bool = False) -> UserInput:
+    def act(self, pose: Pose, listening: bool = False, blocked: bool = False) -> UserInput:
         """The joystick sample for this instant; ``pose`` is the true current pose. While
-        ``listening`` to a question the user keeps still."""
+        ``listening`` to a question the user keeps still; ``blocked`` says the arm refused the last
+        command (a safety halt: the evaluation's arms never refuse)."""
+        self._blocked_s = self._blocked_s + self.dt if blocked else 0.0
         self._seen.append(pose)
         seen = self._seen[0]  # the oldest kept pose: ``reaction_delay_s`` ago
         if listening:

@@ -80,6 +80,7 @@ class Speaker:
         self.error: str | None = None
         self.dropped = 0
         self.busy_since: float | None = None  # time.monotonic() when the current utterance started
+        self._player: subprocess.Popen | None = None  # the aplay process playing now
         self._count = 0
         self._thread = threading.Thread(target=self._run, name="sa-speech", daemon=True)
         self._thread.start()
@@ -148,20 +149,39 @@ class Speaker:
             if shutil.which("aplay") is None:
                 err = "aplay not found (install alsa-utils)"
             else:
-                r = subprocess.run(["aplay", "-q", str(path)], capture_output=True, timeout=60, check=False)
-                played = r.returncode == 0
+                returncode, stderr = self._play(path)
+                played = returncode == 0
                 if not played:
-                    lines = r.stderr.decode(errors="replace").strip().splitlines()
+                    lines = stderr.decode(errors="replace").strip().splitlines()
                     err = f"aplay: {lines[-1][:200]}" if lines else "aplay failed"
         if not keep:
             path.unlink(missing_ok=True)
         return Spoken(text, str(path) if keep else None, played, time.monotonic() - t0, err)
 
+    def _play(self, path: Path) -> tuple[int, bytes]:
+        """Run ``aplay`` (killed after 60 s, or by :meth:`close`): its exit code and stderr."""
+        proc = subprocess.Popen(["aplay", "-q", str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        self._player = proc
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise
+        finally:
+            self._player = None
+        return proc.returncode, err
+
     def close(self, timeout_s: float = 2.0) -> None:
-        """Stop the thread after the current utterance (a hung engine is abandoned: daemon thread)."""
+        """Stop the thread after the current utterance (a hung engine is abandoned: daemon thread; a hung
+        player is killed, so it does not outlive the daemon)."""
         with contextlib.suppress(queue.Empty):  # drop what is still queued, so the stop always fits
             while True:
                 self._q.get_nowait()
+        player = self._player
+        if player is not None:
+            with contextlib.suppress(OSError):
+                player.kill()
         with contextlib.suppress(queue.Full):
             self._q.put_nowait(None)
         self._thread.join(timeout_s)

@@ -1,0 +1,66 @@
+"""Which grasp poses an arm with joints can really reach: inverse kinematics against the joint bounds.
+
+The scene loader's :func:`~sa_daemon.planner.grasps.is_reachable` is a sphere around the shoulder: right
+for the gripper-only kinematic arm, too generous for the xArm-6, whose joint 5 stops at -1.69 rad. Some
+side grasps inside the sphere (head-on, close to the table) would need it beyond that bound; a user
+driving toward one ends at the joint margin (``joint_bound``) and never gets there. So for arms with
+joints (MuJoCo, xArm) the goals keep only poses with an inverse-kinematics solution inside the bounds
+less ``safety.joint_margin_rad``. The same filter serves the daemon and ``sa-daemon eval --arm mujoco``,
+so planner, simulated user and arm agree on the goals.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from ..geometry import FloatArray, Pose
+from ..planner.goals import Goal
+from ..planner.scene import Scene
+from .kinematics import ArmKinematics, IKError, start_configuration
+
+log = logging.getLogger(__name__)
+
+WRIST_SEEDS_RAD = ((0.0, 0.0),)
+"""(joint 4, joint 6) offsets added to the start configuration to seed IK. Only the start's own branch:
+a pose reachable only by the other wrist branch (joint 4 turned by pi, joint 5 mirrored) cannot be
+reached by driving from the start, since joint 5 meets its -1.69 rad bound on the way."""
+
+
+def reaches(kin: ArmKinematics, pose: Pose, q_start: FloatArray, margin_rad: float) -> bool:
+    """True if IK from ``q_start`` (or its wrist-branch seeds) puts the TCP at ``pose`` with every joint
+    at least ``margin_rad`` inside its bounds."""
+    lo, hi = kin.lower + margin_rad, kin.upper - margin_rad
+    for d4, d6 in WRIST_SEEDS_RAD:
+        seed = q_start.copy()
+        seed[3] += d4
+        seed[5] += d6
+        try:
+            q = kin.ik(pose, np.clip(seed, kin.lower, kin.upper), tol_m=1e-4, tol_rad=1e-3)
+        except IKError:
+            continue
+        if np.all(q >= lo) and np.all(q <= hi):
+            return True
+    return False
+
+
+def reachable_scene(scene: Scene, kin: ArmKinematics, margin_rad: float) -> Scene:
+    """``scene`` with each goal's poses restricted to those :func:`reaches` accepts.
+
+    Raises ``ValueError`` naming the goal if one keeps no pose: that task cannot be done on this arm.
+    """
+    q_start = start_configuration(kin, scene.start)
+    goals: list[Goal] = []
+    for g in scene.goals:
+        kept = tuple(p for p in g.poses if reaches(kin, p, q_start, margin_rad))
+        if not kept:
+            raise ValueError(
+                f"scene {scene.name!r}: no grasp pose of {g.target} is reachable by the xArm-6 within its joint "
+                f"bounds less {margin_rad} rad (safety.joint_margin_rad)"
+            )
+        if len(kept) < len(g.poses):
+            log.info("%s: %d of %d grasp poses reachable by the arm", g.target, len(kept), len(g.poses))
+        goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
+    return replace(scene, goals=tuple(goals))

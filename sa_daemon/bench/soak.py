@@ -1,0 +1,144 @@
+"""``sa-daemon bench soak``: the daemon with the simulated user running tasks back to back for a long
+time, watched for memory growth and control-loop overruns.
+
+The run is :func:`~.loop.run_daemon` (the ``bench loop`` machinery, subscriber load included) with RSS
+of the daemon's process and of the planner worker sampled every ``--sample-every`` s.
+
+* **Warm-up**: the first ``min(60 s, 10 % of --duration)`` of the run, start-up included. Memory is
+  judged on the samples after it: "start" is the first of them, "end" the last, growth is
+  ``(end - start) / start`` in %, and the slope is a least-squares fit over all of them (MB/min).
+  The worker is judged on the samples of the worker alive at the end (a restarted worker starts anew).
+* **Overruns**: control periods longer than 1.5 x nominal, counted from READY to the end.
+* **Criteria** (flags, the issue's values by default): daemon and worker growth <= ``--max-growth-pct``
+  (5 %), overruns <= ``--max-overruns`` (0). Each is printed PASS or FAIL; the exit code is 0 when all
+  pass and 1 otherwise, so that CI can run a soak as a check. Timing criteria depend on the machine: on a
+  loaded 2-core one a single overrun can happen, and a short soak's growth is mostly still warm-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from .loop import RssSample, loop_figures, run_daemon, subscriber_rows
+
+#: Warm-up is this fraction of the duration, but never longer than WARMUP_MAX_S.
+WARMUP_FRACTION = 0.1
+WARMUP_MAX_S = 60.0
+
+
+def warmup_s(duration_s: float) -> float:
+    """The warm-up (s from the daemon's start) excluded from the memory criteria."""
+    return min(WARMUP_MAX_S, WARMUP_FRACTION * duration_s)
+
+
+def growth(points: list[tuple[float, float]]) -> dict[str, Any]:
+    """Start, end (MB), growth (%) and least-squares slope (MB/min) of ``(t_s, MB)`` points; ``None``
+    figures when there are fewer than two."""
+    if len(points) < 2 or points[0][1] <= 0:
+        return {"start_mb": None, "end_mb": None, "growth_pct": None, "slope_mb_per_min": None,
+                "samples": len(points)}
+    t = np.array([p[0] for p in points]) / 60.0
+    mb = np.array([p[1] for p in points])
+    return {
+        "start_mb": float(mb[0]),
+        "end_mb": float(mb[-1]),
+        "growth_pct": float(100.0 * (mb[-1] - mb[0]) / mb[0]),
+        "slope_mb_per_min": float(np.polyfit(t, mb, 1)[0]),
+        "samples": len(points),
+    }
+
+
+def memory_figures(rss: list[RssSample], warmup: float) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Growth of the daemon and of the last planner worker over the samples after ``warmup`` s."""
+    after = [s for s in rss if s.t_s >= warmup]
+    last_pid = rss[-1].worker_pid if rss else None
+    daemon = growth([(s.t_s, s.daemon_mb) for s in after])
+    worker = growth([(s.t_s, s.worker_mb) for s in after if last_pid and s.worker_pid == last_pid])
+    return daemon, worker
+
+
+def _criterion(name: str, value: float | None, limit: float) -> dict[str, Any]:
+    """One criterion; a figure that could not be measured fails."""
+    return {"name": name, "value": value, "limit": limit, "pass": value is not None and value <= limit}
+
+
+def run_soak(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the soak of ``args`` and return its figures and verdicts (see module doc)."""
+    warm = warmup_s(args.duration)
+    if args.sample_every <= 0 or args.duration - warm < 2 * args.sample_every:
+        raise ValueError(f"--sample-every {args.sample_every} s leaves fewer than 3 samples after the "
+                         f"{warm:.1f} s warm-up of a {args.duration} s soak")
+    run = run_daemon(args, sample_every_s=args.sample_every)
+    loop = loop_figures(run)
+    daemon_rss, worker_rss = memory_figures(run.rss, warm)
+    criteria = [
+        _criterion("daemon RSS growth %", daemon_rss["growth_pct"], args.max_growth_pct),
+        _criterion("worker RSS growth %", worker_rss["growth_pct"], args.max_growth_pct),
+        _criterion("control overruns", loop["overruns"], args.max_overruns),
+    ]
+    return {
+        "duration_s": loop["duration_s"],
+        "soak_s": args.duration,
+        "arm": loop["arm"],
+        "method": loop["method"],
+        "warmup_s": warm,
+        "sample_every_s": args.sample_every,
+        "daemon_rss": daemon_rss,
+        "worker_rss": worker_rss,
+        "overruns": loop["overruns"],
+        "overrun_pct": 100.0 * loop["overrun_fraction"],
+        "control_ticks": loop["control_ticks"],
+        "period_err_ms_p99": loop["period_err_ms_p99"],
+        "period_err_ms_max": loop["period_err_ms_max"],
+        "planner_restarts": loop["planner_restarts"],
+        "questions_asked": sum(d["questions"] for d in run.daemon.tasks_done),  # in finished tasks
+        "tasks_done": loop["tasks_done"],
+        "tasks_succeeded": loop["tasks_succeeded"],
+        "state_messages_published": loop["state_messages_published"],
+        "pub_dropped": loop["pub_dropped"],
+        "subscribers": loop["subscribers"],
+        "criteria": criteria,
+        "pass": all(c["pass"] for c in criteria),
+        "rss_series": [asdict(s) for s in run.rss],
+        "loop": loop,
+    }
+
+
+def _mb(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.1f} MB"
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:+.2f} %"
+
+
+def format_soak(f: dict[str, Any]) -> str:
+    """The figures as a table, then one PASS/FAIL line per criterion."""
+    d, w = f["daemon_rss"], f["worker_rss"]
+    slope = "n/a" if d["slope_mb_per_min"] is None else f"{d['slope_mb_per_min']:+.3f} MB/min"
+    wslope = "n/a" if w["slope_mb_per_min"] is None else f"{w['slope_mb_per_min']:+.3f} MB/min"
+    rows = [
+        ("daemon RSS start -> end", f"{_mb(d['start_mb'])} -> {_mb(d['end_mb'])}"),
+        ("daemon RSS growth / slope", f"{_pct(d['growth_pct'])} / {slope}"),
+        ("worker RSS start -> end", f"{_mb(w['start_mb'])} -> {_mb(w['end_mb'])}"),
+        ("worker RSS growth / slope", f"{_pct(w['growth_pct'])} / {wslope}"),
+        ("overruns (> 1.5 T)", f"{f['overruns']} of {f['control_ticks']} ({f['overrun_pct']:.3f} %)"),
+        ("period error p99 / max", f"{f['period_err_ms_p99']:.3f} / {f['period_err_ms_max']:.3f} ms"),
+        ("planner restarts", str(f["planner_restarts"])),
+        ("questions asked", str(f["questions_asked"])),
+        ("tasks done / succeeded", f"{f['tasks_done']} / {f['tasks_succeeded']}"),
+        ("states published / PUB sends refused", f"{f['state_messages_published']} / {f['pub_dropped']}"),
+        *((a, b) for a, b, _ in subscriber_rows(f["subscribers"])),
+    ]
+    width = max(len(r[0]) for r in rows)
+    head = (f"bench soak: {f['arm']} arm, {f['method']}, {f['duration_s']:.1f} s "
+            f"(warm-up {f['warmup_s']:.1f} s, RSS every {f['sample_every_s']:g} s)")
+    verdicts = [f"  {'PASS' if c['pass'] else 'FAIL'}  {c['name']} "
+                f"{'n/a' if c['value'] is None else format(c['value'], '.3g')} <= {c['limit']:g}"
+                for c in f["criteria"]]
+    return "\n".join([head, *(f"  {a:<{width}}  {b}" for a, b in rows), *verdicts,
+                      f"soak {'PASS' if f['pass'] else 'FAIL'}"])
