@@ -39,6 +39,7 @@ CFG = Config()
 CONTROL_S = 1.0 / CFG.runtime.control_hz
 PLAN_S = CFG.planner.period_s
 MAX_STATE_GAP_S = 0.2
+RECEIVER_GAP_S = 0.5  # s: arrival gaps at a subscriber in the busy test process
 ZERO6 = [0.0] * 6
 
 
@@ -989,7 +990,9 @@ def test_the_daemon_survived_the_fuzzing(target):
     st_ = target.request({"cmd": "status"})
     assert st_["ok"] and st_["pid"] == target.proc.pid and target.proc.poll() is None
     gap_t, gap_rx = state_gaps(target)
-    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= MAX_STATE_GAP_S, (gap_t, gap_rx)
+    # The daemon's own clock decides "never paused"; the arrival gap also holds the test process's
+    # scheduling (its subscriber shares the GIL with the fuzzing client): a looser bound there.
+    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
 
 
 def test_huge_requests_are_refused_or_dropped_by_zeromq_and_the_client_recovers(target):
