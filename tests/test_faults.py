@@ -39,7 +39,8 @@ CFG = Config()
 CONTROL_S = 1.0 / CFG.runtime.control_hz
 PLAN_S = CFG.planner.period_s
 MAX_STATE_GAP_S = 0.2
-RECEIVER_GAP_S = 0.5  # s: arrival gaps at a subscriber in the busy test process
+RECEIVER_GAP_S = 0.5  # s: arrival gaps at the test's subscriber also hold this busy process's scheduling;
+# "the stream never pauses" is decided on the daemon's own clock (MAX_STATE_GAP_S)
 ZERO6 = [0.0] * 6
 
 
@@ -148,7 +149,7 @@ def test_joystick_lost_mid_motion_zeroes_the_command_at_the_next_tick_and_comes_
     assert all(math.isfinite(x) for s in states for x in s["command_twist"])
     latency = zero["t"] - t_unplug
     assert latency <= 2 * CONTROL_S, f"command zero {latency * 1e3:.1f} ms after the unplug"
-    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= MAX_STATE_GAP_S, (gap_t, gap_rx)
+    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     back_s = back["t"] - t_replug
     assert back_s <= 0.2 + 0.5  # the next poll (joystick.poll_s = 0.2) finds it
     figure("joystick_lost", f"command zero {latency * 1e3:.1f} ms after the unplug ({after.index(zero)} ticks "
@@ -241,7 +242,7 @@ def test_planner_worker_killed_or_hung_falls_back_and_is_replaced(tmp_path, sig)
         assert restart_s <= silent_s + PLAN_S + 2 * CONTROL_S
         assert any(e["type"] == "planner_late" for e in events if t_fault <= e["t"] <= restart["t"])
     assert new_ok_s - restart_s <= 1.0 + 0.5, f"new worker planning {new_ok_s - restart_s:.2f} s after the restart"
-    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= MAX_STATE_GAP_S, (gap_t, gap_rx)
+    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     figure(f"planner_{'sigkill' if sig == signal.SIGKILL else 'hang'}",
            f"no-assist {fallback_s * 1e3:.0f} ms after the fault, {late_s * 1e3:.0f} ms (-0..{uncertain_s * 1e3:.0f} ms) "
            f"after the missing plan was due (period {PLAN_S * 1e3:.0f} ms); planner_restart {restart_s:.2f} s after the fault; new worker "
@@ -649,7 +650,7 @@ def ask_and_answer(d: DaemonProc, start: int, timeout_s: float = 60.0) -> tuple[
 def loops_unaffected(d: DaemonProc, start: int, t0: float, t1: float, path: Path) -> str:
     """The state stream (no gap over 200 ms) and the control loop (recorded ticks) while speech was broken."""
     gap_t, gap_rx = state_gaps(d, start)
-    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= MAX_STATE_GAP_S, (gap_t, gap_rx)
+    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     states, _, log_ns = recording(path)
     periods = control_periods(log_ns, t0, t1, states)
     assert len(periods) >= 0.9 * (t1 - t0) / CONTROL_S, f"{len(periods)} control ticks in {t1 - t0:.1f} s"
@@ -1089,7 +1090,7 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     rate = (len(flood) - 1) / (flood[-1][0] - flood[0][0])
     gap_t, gap_rx = state_gaps(target, i0)
     assert rate >= 20.0, f"{rate:.1f} Hz during the flood"
-    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= MAX_STATE_GAP_S, (gap_t, gap_rx)
+    assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     assert after_ms <= max(3 * before_ms, before_ms + 5.0), (before_ms, after_ms)
     deadline = time.monotonic() + 10 * CFG.record.flush_s
     while max(log_ns := recording(target.dir / "fuzz.mcap")[2]) <= t_end_ns:  # until the file has the flood
