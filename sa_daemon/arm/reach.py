@@ -23,27 +23,19 @@ from .kinematics import ArmKinematics, IKError, start_configuration
 
 log = logging.getLogger(__name__)
 
-WRIST_SEEDS_RAD = ((0.0, 0.0),)
-"""(joint 4, joint 6) offsets added to the start configuration to seed IK. Only the start's own branch:
-a pose reachable only by the other wrist branch (joint 4 turned by pi, joint 5 mirrored) cannot be
-reached by driving from the start, since joint 5 meets its -1.69 rad bound on the way."""
-
-
 def reaches(kin: ArmKinematics, pose: Pose, q_start: FloatArray, margin_rad: float) -> bool:
-    """True if IK from ``q_start`` (or its wrist-branch seeds) puts the TCP at ``pose`` with every joint
-    at least ``margin_rad`` inside its bounds."""
-    lo, hi = kin.lower + margin_rad, kin.upper - margin_rad
-    for d4, d6 in WRIST_SEEDS_RAD:
-        seed = q_start.copy()
-        seed[3] += d4
-        seed[5] += d6
-        try:
-            q = kin.ik(pose, np.clip(seed, kin.lower, kin.upper), tol_m=1e-4, tol_rad=1e-3)
-        except IKError:
-            continue
-        if np.all(q >= lo) and np.all(q <= hi):
-            return True
-    return False
+    """True if IK seeded at ``q_start`` puts the TCP at ``pose`` with every joint at least ``margin_rad``
+    inside its bounds.
+
+    Seeded at the start only, so the solution stays on the start's wrist branch: a pose reachable only
+    by the other branch (joint 4 turned by pi, joint 5 mirrored) cannot be reached by driving from the
+    start, since joint 5 meets its -1.69 rad bound on the way.
+    """
+    try:
+        q = kin.ik(pose, q_start, tol_m=1e-4, tol_rad=1e-3)
+    except IKError:
+        return False
+    return bool(np.all(q >= kin.lower + margin_rad) and np.all(q <= kin.upper - margin_rad))
 
 
 def reachable_scene(scene: Scene, kin: ArmKinematics, margin_rad: float) -> Scene:

@@ -195,7 +195,10 @@ class SafetyPipeline:
     def singularity_share(self, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
         """``(k, share)``: the condition number at ``q`` (rad) and the share of ``twist`` (m/s, rad/s)
         along the weakest output direction, signed positive toward the singularity (stage 8)."""
-        jac = self._normalised_jacobian(q)
+        return self._share(self._normalised_jacobian(q), q, twist)
+
+    def _share(self, jac: FloatArray, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
+        """:meth:`singularity_share` with the normalised Jacobian at ``q`` already computed."""
         u_mat, sing, _ = np.linalg.svd(jac)
         kappa = float(sing[0] / sing[-1]) if sing[-1] > 0 else float("inf")
         u = u_mat[:, -1]
@@ -215,9 +218,10 @@ class SafetyPipeline:
         if not np.any(t):
             return t
         c = self.cfg
-        kappa = self._condition(q)
+        jac = self._normalised_jacobian(q)  # once per tick: the share below reuses it
+        kappa = float(np.linalg.cond(jac))
         if kappa > c.singularity_slow:
-            kappa, share = self.singularity_share(q, t)
+            kappa, share = self._share(jac, q, t)
             if share > c.singularity_share:  # moving toward the singularity
                 if kappa >= c.singularity_stop:
                     codes.append(SafetyCode.SINGULARITY_HALT)
