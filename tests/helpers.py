@@ -29,6 +29,17 @@ START_TIMEOUT_S = 60.0
 DEFAULT_RUN = ("--arm", "kinematic", "--input", "sim", "--scene", "scene1", "--task", "cup:top")
 
 
+
+# The eval JSON's required keys (issue 3: one object per trial, one per (scene, task, method)).
+TRIAL_KEYS = (
+    "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes", "joystick_input",
+    "opposing_pct", "correct_prediction", "questions",
+)
+SUMMARY_KEYS = (
+    "scene", "task", "method", "n", "success_rate", "completion_time_s", "mode_changes", "joystick_input",
+    "opposing_pct", "correct_prediction_rate", "questions",
+)
+
 def free_port() -> int:
     """A free loopback TCP port (bind to port 0, read it back, release it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

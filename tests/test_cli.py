@@ -11,16 +11,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import SUMMARY_KEYS, TRIAL_KEYS
 
 TIMEOUT_S = 180
-SUMMARY_KEYS = (
-    "scene", "task", "method", "n", "success_rate", "completion_time_s", "mode_changes", "joystick_input",
-    "opposing_pct", "correct_prediction_rate", "questions",
-)
-TRIAL_KEYS = (
-    "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes", "joystick_input",
-    "opposing_pct", "correct_prediction", "questions",
-)
 BENCH_KEYS = ("solve_ms_p50", "solve_ms_p99", "agreement_at_budget", "peer_agreement_at_budget", "belief_update_us_p50")
 
 

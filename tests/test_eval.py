@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import SUMMARY_KEYS, TRIAL_KEYS
 
 from sa_daemon.arm.kinematic import KinematicArm
 from sa_daemon.config import Config, config_from_dict
@@ -18,15 +19,6 @@ from sa_daemon.sim.evaluate import (
     run_trials,
     summarise,
     write_results,
-)
-
-METRIC_KEYS = (
-    "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes", "joystick_input",
-    "opposing_pct", "correct_prediction", "questions",
-)
-SUMMARY_KEYS = (
-    "scene", "task", "method", "n", "success_rate", "completion_time_s", "mode_changes", "joystick_input",
-    "opposing_pct", "correct_prediction_rate", "questions",
 )
 
 
@@ -65,7 +57,7 @@ def test_trial_metrics_record_has_every_metric_and_the_seed(scene1):
     r = run_trial(scene1, "bowl:top", "manual", 7, _noisy())
     assert isinstance(r, TrialResult)
     m = r.metrics()
-    for k in METRIC_KEYS:
+    for k in TRIAL_KEYS:
         assert k in m
     assert (m["scene"], m["task"], m["method"], m["seed"]) == ("scene1", "bowl:top", "manual", 7)
     assert "timeline" not in m
@@ -254,7 +246,7 @@ def test_write_results_json_shape(serial, tmp_path):
     assert data["meta"] == {"scene": "scene1", "seeds": 2}
     assert len(data["trials"]) == len(SPECS)
     for spec, t in zip(SPECS, data["trials"]):
-        for k in METRIC_KEYS:
+        for k in TRIAL_KEYS:
             assert k in t, k
         assert t["seed"] == spec.seed and t["task"] == spec.task and t["method"] == spec.method
     assert len(data["summary"]) == 4  # 2 tasks x 2 methods
