@@ -89,6 +89,9 @@ class RewardConfig(_Section):
     rotation_threshold_m: float = Field(0.1, gt=0, description="delta: R_r applies when d_trans <= delta")
     opposition_penalty: float = Field(-5.0, le=0)
     opposition_threshold: float = Field(0.01, ge=0, description="|a_i| above this in both twists")
+    opposition_every_step: bool = Field(
+        True, description="charge the opposition penalty at every lookahead step it is predicted (false: the first only)"
+    )
     question: float = Field(-5.0, le=0)
     question_time_s: float = Field(
         0.0, ge=0, description="time a question stops progress (s): costs this share of the best move's gain"

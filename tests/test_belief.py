@@ -198,6 +198,11 @@ def test_wrong_shape_user_twist_is_refused():
 # -- cap ------------------------------------------------------------------------------------------------
 
 
+def test_cap_spreads_excess_only_over_the_goals_given():
+    p = cap_probabilities(np.array([0.995, 0.001, 0.002, 0.002]), 0.99, np.array([True, False, True, True]))
+    assert p == pytest.approx([0.99, 0.001, 0.0045, 0.0045])
+
+
 def test_cap_spreads_excess_equally():
     got = cap_probabilities(np.array([0.995, 0.003, 0.002]), 0.99)
     excess = 0.995 - 0.99
@@ -437,7 +442,7 @@ def test_yes_confirms_the_target_against_later_joystick_evidence(scene, start_po
 
 
 def test_without_confirmation_the_same_evidence_moves_the_target(scene, start_pose, cfg):
-    b = Belief.uniform(scene).after_answer("cup:side", False, cfg.intent)  # "no" is soft evidence
+    b = Belief.uniform(scene).after_answer("cup:side", False, cfg.intent)  # "no" confirms nothing
     assert b.confirmed is None
     u = _toward(start_pose, scene.goals[3])
     before = b.target_probabilities()["bowl:top"]
@@ -468,3 +473,60 @@ def test_confirmation_survives_resampling(make_goal, start_pose, cfg):
     r = b.resampled(start_pose, cfg.intent)
     assert len(r.goals) > len(b.goals)  # copies were made
     assert r.confirmed == "cup:top"
+
+
+# -- a "no" answer is final too: the denied target's share stays where the answer put it -------------------
+
+
+def test_no_keeps_the_denied_target_down_against_joystick_evidence(scene, start_pose, cfg):
+    b = Belief.uniform(scene).after_answer("bowl:top", False, cfg.intent)
+    assert b.ruled_out == frozenset({"bowl:top"})
+    denied = b.target_probabilities()["bowl:top"]
+    assert denied < 0.002
+    u = _toward(start_pose, scene.goals[3])  # straight at the bowl the user said no to
+    for _ in range(400):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.target_probabilities()["bowl:top"] == pytest.approx(denied, rel=1e-9)
+
+
+def test_without_the_answer_the_same_evidence_brings_the_target_up(scene, start_pose, cfg):
+    b = Belief.from_probs(scene, np.array([0.333, 0.333, 0.333, 0.001]))
+    u = _toward(start_pose, scene.goals[3])
+    for _ in range(400):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.target_probabilities()["bowl:top"] > 0.05  # 50x up: what the "no" prevents above
+
+
+def test_after_a_no_the_other_targets_still_compete(scene, start_pose, cfg):
+    b = Belief.uniform(scene).after_answer("cup:side", False, cfg.intent)
+    before = b.target_probabilities()
+    u = _toward(start_pose, scene.goals[3])
+    for _ in range(50):
+        b = b.after_input(start_pose, u, cfg.intent)
+    after = b.target_probabilities()
+    assert after["bowl:top"] > before["bowl:top"] + 0.1
+    assert after["cup:side"] == pytest.approx(before["cup:side"], rel=1e-9)
+
+
+def test_answers_accumulate_and_survive_resampling(make_goal, start_pose, cfg):
+    poses = [[0.45, y, 0.09] for y in (0.10, 0.12, 0.14, 0.16)]
+    cup = make_goal("cup", "top", *poses)
+    others = [make_goal(o, "top", [0.3, y, 0.06]) for o, y in (("bowl", -0.2), ("plate", -0.3), ("box", 0.3))]
+    b = Belief.uniform(GoalSet((cup, *others)))
+    b = b.after_answer("bowl:top", False, cfg.intent).after_answer("plate:top", False, cfg.intent)
+    assert b.ruled_out == frozenset({"bowl:top", "plate:top"})
+    b = b.after_answer("cup:top", True, cfg.intent)
+    r = b.resampled(start_pose, cfg.intent)
+    assert len(r.goals) > len(b.goals)  # copies were made
+    assert (r.confirmed, r.ruled_out) == ("cup:top", frozenset({"bowl:top", "plate:top"}))
+
+
+def test_every_target_denied_falls_back_to_the_joystick(scene, start_pose, cfg):
+    b = Belief.uniform(scene)
+    for t in ("cup:top", "cup:side", "chips_can:side", "bowl:top"):  # one answer must have been wrong
+        b = b.after_answer(t, False, cfg.intent)
+    before = b.target_probabilities()["bowl:top"]
+    u = _toward(start_pose, scene.goals[3])
+    for _ in range(50):
+        b = b.after_input(start_pose, u, cfg.intent)
+    assert b.target_probabilities()["bowl:top"] > before + 0.1

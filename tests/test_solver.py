@@ -34,10 +34,10 @@ from sa_daemon.planner.solver import Solver
 TOP = (math.pi, 0.0, 0.0)
 
 
-def config(H: int = 15, top_goals: int = 3, max_questions: int = 10) -> Config:
+def config(H: int = 15, top_goals: int = 3, max_questions: int = 10, every_step: bool = False) -> Config:
     return config_from_dict(
         {
-            "reward": {"lookahead_steps": H},
+            "reward": {"lookahead_steps": H, "opposition_every_step": every_step},
             "planner": {"top_goals": top_goals, "max_questions": max_questions},
             # The geometry of these tests was laid out for move limits equal to the joystick's.
             "move": {"linear_max_mps": 0.2, "angular_max_radps": 0.4},
@@ -305,9 +305,10 @@ def hand_desired_poses(goals: GoalSet, pose: Pose, w: float = 0.05):
 
 
 def hand_rollout(cfg: Config, action, pose: Pose, u: np.ndarray, kp, kq, b0) -> np.ndarray:
-    """Reward vector over goals of one move action: H steps, then distance reward; opposition at step 0."""
+    """Reward vector over goals of one move action: H steps, then distance reward; the opposition penalty
+    at step 0, or at every step it is predicted with ``opposition_every_step``."""
     pos, quat = pose.position.copy(), pose.quat_wxyz.copy()
-    opposed = False
+    penalty = 0.0
     for step in range(cfg.reward.lookahead_steps):
         if action.kind is ActionKind.MOVE:
             r = move_twist(pos, quat, kp[action.goal], kq[action.goal], cfg.move)
@@ -316,22 +317,23 @@ def hand_rollout(cfg: Config, action, pose: Pose, u: np.ndarray, kp, kq, b0) -> 
         else:
             r = np.zeros(6)
         total = u if action.kind is ActionKind.NONE else blend(u, r, cfg.blend)
-        if step == 0:
-            opposed = bool(opposes(u, r, cfg.reward.opposition_threshold))
+        if (step == 0 or cfg.reward.opposition_every_step) and opposes(u, r, cfg.reward.opposition_threshold):
+            penalty += cfg.reward.opposition_penalty
         pos, quat = integrate_pose(pos, quat, total, cfg.reward.step_s)
     out = []
     for g in range(len(kp)):
         d_t = math.dist(pos, kp[g])
         d_r = float(quat_angle(quat, kq[g]))
-        out.append(float(distance_reward(d_t, d_r, cfg.reward)) + (cfg.reward.opposition_penalty if opposed else 0.0))
+        out.append(float(distance_reward(d_t, d_r, cfg.reward)) + penalty)
     return np.array(out)
 
 
+@pytest.mark.parametrize("every_step", [False, True], ids=["oppose-first", "oppose-every"])
 @pytest.mark.parametrize("H", [1, 15])
 @pytest.mark.parametrize(
     "user", [[0, 0, 0, 0, 0, 0], [-0.15, 0.05, 0, 0, 0, 0], [0, 0, 0, 0.3, 0, -0.2]], ids=["still", "lin", "rot"]
 )
-def test_move_rewards_equal_a_hand_rollout(make_goal, start_pose, H, user):
+def test_move_rewards_equal_a_hand_rollout(make_goal, start_pose, H, user, every_step):
     p = start_pose.position
     goals = GoalSet(
         (
@@ -341,7 +343,7 @@ def test_move_rewards_equal_a_hand_rollout(make_goal, start_pose, H, user):
             make_goal("bowl", "top", p + [0.005, 0.0, -0.005], rpy=[math.pi, -math.pi / 4 + 0.02, 0.0]),
         )
     )
-    cfg = config(H=H, top_goals=10)
+    cfg = config(H=H, top_goals=10, every_step=every_step)
     probs = np.array([0.4, 0.3, 0.2, 0.1])
     u = np.asarray(user, dtype=float)
     snap = Snapshot(goals, probs, start_pose, u, budget_s=None)
@@ -377,6 +379,19 @@ def test_opposition_penalty_judged_on_the_first_step(make_goal, start_pose):
     d_r = float(quat_angle(kq[0], start_pose.quat_wxyz))
     assert prob.M[0, cup] == pytest.approx(float(distance_reward(d_t, d_r, cfg.reward)) - 5.0, abs=1e-9)
     assert prob.M[0, none] > prob.M[0, cup] - 5.0  # no-assist never opposes
+
+
+@pytest.mark.parametrize("every_step, steps_charged", [(False, 1), (True, 15)])
+def test_a_move_that_keeps_opposing_pays_at_every_lookahead_step(make_goal, start_pose, every_step, steps_charged):
+    # The user turns the gripper about z; the cup's grasp wants the opposite turn for the whole window.
+    goal = make_goal("cup", "top", start_pose.position, rpy=[math.pi, -math.pi / 4, -1.0])
+    goals = GoalSet((goal, make_goal("bowl", "top", start_pose.position + [0.0, 0.3, 0.0])))
+    u = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
+    both = [Problem(SharedAutonomyModel(config(H=15, every_step=e)), Snapshot(goals, np.array([0.5, 0.5]), start_pose, u))
+            for e in (False, every_step)]
+    cup = next(i for i, a in enumerate(both[0].moves) if a.kind is ActionKind.MOVE and a.goal == 0)
+    extra = (steps_charged - 1) * -5.0
+    np.testing.assert_allclose(both[1].M[:, cup], both[0].M[:, cup] + extra, atol=1e-9)
 
 
 # -- Problem: upper bounds ------------------------------------------------------------------------------

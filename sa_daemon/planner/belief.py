@@ -41,17 +41,18 @@ def log_sum_exp(x: FloatArray) -> float:
     return top + float(np.log(np.sum(np.exp(x - top))))
 
 
-def cap_probabilities(p: FloatArray, cap: float) -> FloatArray:
-    """Clamp any probability above ``cap`` to ``cap`` and spread the excess equally over the others."""
+def cap_probabilities(p: FloatArray, cap: float, among: np.ndarray | None = None) -> FloatArray:
+    """Clamp any probability above ``cap`` to ``cap`` and spread the excess equally over the others
+    (over the others in the boolean mask ``among`` if given: goals of answered targets take none)."""
     p = np.array(p, dtype=float)
-    if len(p) < 2:
-        return p
     i = int(np.argmax(p))
-    if p[i] > cap:
+    others = np.arange(len(p)) != i
+    if among is not None:
+        others &= among
+    if p[i] > cap and others.any():
         excess = p[i] - cap
         p[i] = cap
-        others = np.arange(len(p)) != i
-        p[others] += excess / (len(p) - 1)
+        p[others] += excess / int(others.sum())
     return p
 
 
@@ -59,14 +60,18 @@ def cap_probabilities(p: FloatArray, cap: float) -> FloatArray:
 class Belief:
     """Goals and their normalised log-probabilities.
 
-    ``confirmed`` is the high-level target the user said "yes" to, if any: "once the user answers yes,
-    the high-level target is known" (section III-B), so from then on joystick input only moves
-    probability among that target's goals (its grasp-pose copies) and the target's total is kept.
+    Answers are final (``docs/model.md``). ``confirmed`` is the high-level target the user said "yes" to,
+    if any: "once the user answers yes, the high-level target is known" (section III-B), so from then on
+    joystick input only moves probability among that target's goals (its grasp-pose copies) and the
+    target's total is kept. ``ruled_out`` holds the targets the user said "no" to: joystick input no
+    longer moves their probability (the answer's ``1 - answer_p_correct`` share stays as it is), so a few
+    seconds of ambiguous motion cannot bring back a target the user has denied.
     """
 
     goals: GoalSet
     log_p: FloatArray
     confirmed: str | None = None
+    ruled_out: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         lp = np.array(self.log_p, dtype=float)
@@ -106,13 +111,26 @@ class Belief:
         """Probability of each high-level target: what users and metrics see."""
         return self.goals.target_probabilities(self.probs)
 
-    def _normalised(self, log_p: FloatArray, cap: float, confirmed: str | None = None) -> Belief:
+    def _with(self, log_p: FloatArray, confirmed: str | None = None, ruled_out: frozenset[str] = frozenset()) -> Belief:
+        """A belief over the same goals with ``log_p`` and the answers so far plus the new ones."""
+        return Belief(self.goals, log_p, confirmed or self.confirmed, self.ruled_out | ruled_out)
+
+    def _normalised(self, log_p: FloatArray, cap: float, among: np.ndarray | None = None) -> FloatArray:
         log_p = log_p - log_sum_exp(log_p)
         p = np.exp(log_p)
         if p.max() > cap:
             with np.errstate(divide="ignore"):
-                log_p = np.log(cap_probabilities(p, cap))
-        return Belief(self.goals, log_p, confirmed if confirmed is not None else self.confirmed)
+                log_p = np.log(cap_probabilities(p, cap, among))
+        return log_p
+
+    def _competing(self) -> np.ndarray | None:
+        """Goals whose probability joystick input may move (``None``: all of them)."""
+        if self.confirmed is not None:
+            return self.goals.target_mask(self.confirmed)
+        if not self.ruled_out:
+            return None
+        free = ~np.isin(np.array(self.goals.targets)[self.goals.target_index], list(self.ruled_out))
+        return free if free.any() else None  # every target denied (a wrong answer): trust the joystick
 
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:
         """MaxEnt IOC update from one joystick sample: ``log b(g) -= Q_g(x, u) - V_g(x)``.
@@ -122,14 +140,16 @@ class Belief:
         """
         u = _check_finite("user_twist", user_twist, (6,))
         nll = q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
-        if self.confirmed is None:
-            return self._normalised(self.log_p - nll, cfg.cap)
-        # Only the confirmed target's copies compete; its total probability stays as it is.
-        own = self.goals.target_mask(self.confirmed)
+        free = self._competing()
+        if free is None:
+            return self._with(self._normalised(self.log_p - nll, cfg.cap))
+        # Only the free goals compete, within their joint probability; answered targets keep theirs.
         lp = np.array(self.log_p)
-        inner = lp[own] - nll[own]
-        lp[own] = log_sum_exp(lp[own]) + inner - log_sum_exp(inner)
-        return Belief(self.goals, lp, self.confirmed)
+        inner = lp[free] - nll[free]
+        lp[free] = log_sum_exp(lp[free]) + inner - log_sum_exp(inner)
+        if self.confirmed is None:
+            lp = self._normalised(lp, cfg.cap, free)
+        return self._with(lp)
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -141,7 +161,8 @@ class Belief:
         if target not in self.goals.targets:
             raise ValueError(f"unknown target {target!r}")
         like = self.answer_likelihood(target, yes, cfg.answer_p_correct)
-        return self._normalised(self.log_p + np.log(like), cfg.cap, target if yes else None)
+        log_p = self._normalised(self.log_p + np.log(like), cfg.cap)
+        return self._with(log_p, target) if yes else self._with(log_p, ruled_out=frozenset({target}))
 
     # -- resampling and redistribution (section III-G) -------------------------------------------------
 
@@ -189,4 +210,4 @@ class Belief:
                 goals.append(template.with_poses(tuple(own)))
                 probs.append(tp[t] / n)
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        return Belief(out.goals, out.log_p, self.confirmed)
+        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)

@@ -14,8 +14,10 @@ HyP-DESPOT does. After hypothetical answers inside the search the HO action keep
 Lookahead (``reward.lookahead_steps = H``): a move is judged at the pose it reaches after ``H`` steps of
 ``reward.step_s``, the robot twist recomputed from the pose at every step (HO with the planning-time
 belief) and the user's twist held at its last value (the paper's ``a_{h,t} ~ a_{h,t-1}``); ``H = 1`` is the
-literal one-step reading. Opposition is judged on the first step, where the user's twist is known. Each
-goal is represented by its ``k_c``.
+literal one-step reading. The opposition penalty is charged at every step of the window where the
+robot's twist opposes the held user twist (``reward.opposition_every_step``, the default: a move that
+keeps fighting the user for ``H`` steps costs ``H`` penalties), or only on the first step, where the
+user's twist is known (the paper's one-step reading). Each goal is represented by its ``k_c``.
 """
 
 from __future__ import annotations
@@ -87,14 +89,14 @@ class Problem:
         blended = np.array([k is not ActionKind.NONE for k in kinds])  # no-assist: the user's twist alone
         pos = np.tile(pose.position, (n, 1))
         quat = np.tile(pose.quat_wxyz, (n, 1))
-        opposed = np.zeros(n, dtype=bool)
+        penalty = np.zeros(n)
         for step in range(self.H):
             r = self._robot_twists(pos, quat)
             total = np.where(blended[:, None], blend(u, r, cfg.blend), u)
-            if step == 0:
-                opposed = opposes(u, r, cfg.reward.opposition_threshold)
+            if step == 0 or cfg.reward.opposition_every_step:
+                penalty += opposition_reward(opposes(u, r, cfg.reward.opposition_threshold), cfg.reward)
             pos, quat = integrate_pose(pos, quat, total, self.dt)
-        rewards = self._rewards_at(pos, quat) + opposition_reward(opposed, cfg.reward)[:, None]
+        rewards = self._rewards_at(pos, quat) + penalty[:, None]
         if cfg.reward.discount_lookahead:
             rewards = rewards * self.gamma**self.H  # received when the pose is reached
         return rewards.T
