@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -138,17 +140,28 @@ def test_singularity_slows_then_halts_when_moving_toward_it():
     ([0.01, 0.05, 0.0, 0.0, 0.0, 0.0], True),  # share 0.2 > 0.15
     ([0.005, 0.05, 0.0, 0.0, 0.0, 0.0], False),  # share 0.1: within the dead band
 ])
-def test_beyond_stop_only_a_share_toward_the_singularity_halts(twist, halted):
+def test_beyond_stop_only_the_part_toward_the_singularity_is_removed(twist, halted):
     kin = _Kin(lambda q: 10.0 + 20.0 * q[0])
     p = pipe(kinematics=kin)
     q = np.array([1.2, 0, 0, 0, 0, 0])  # kappa 34
     for _ in range(100):
         r = p.filter(twist, CENTRE, joints=q)
     if halted:
-        assert r.status is SafetyCode.SINGULARITY_HALT and not np.any(r.twist)
+        assert r.status is SafetyCode.SINGULARITY_HALT
+        np.testing.assert_allclose(r.twist, [0.0] + list(twist[1:]), atol=1e-12)  # the y part moves on
     else:
         assert r.codes == ()
         np.testing.assert_allclose(r.twist, twist)
+
+
+def test_slowing_scales_only_the_part_toward_the_singularity():
+    kin = _Kin(lambda q: 10.0 + 20.0 * q[0])
+    p = pipe(kinematics=kin)
+    q_slow = np.array([0.4, 0, 0, 0, 0, 0])  # kappa 18
+    for _ in range(100):
+        r = p.filter([0.02, 0.03, 0, 0, 0, 0.1], CENTRE, joints=q_slow)
+    assert r.status is SafetyCode.SINGULARITY_SLOW
+    np.testing.assert_allclose(r.twist, [0.02 * (1 - (18 - 17) / 13), 0.03, 0, 0, 0, 0.1], atol=1e-12)
 
 
 def test_joint_near_bound_halts_only_toward_it():
@@ -266,3 +279,45 @@ def test_refuses_means_a_joint_stage_let_almost_nothing_through():
     assert not SafetyResult(asked * 0.5, (SafetyCode.SINGULARITY_SLOW,)).refuses(asked)
     assert not SafetyResult(np.zeros(6), (SafetyCode.ACCEL,)).refuses(asked)  # not the arm refusing
     assert not SafetyResult(np.zeros(6), (SafetyCode.JOINT_BOUND,)).refuses(np.zeros(6))  # nothing asked
+
+
+def _align_through_the_pipeline(q, target, seconds=30.0):
+    """Rotate the real xArm-6 (Pinocchio kinematics, joints integrated at the pipeline's rate) toward
+    ``target``'s orientation with a saturated proportional command, as a user in rotation mode does.
+    Returns the final joints, the rotation error left (rad) and the largest joint speed (rad/s)."""
+    from sa_daemon.arm.kinematics import ArmKinematics
+    from sa_daemon.geometry import quat_angle, rotation_error
+
+    kin = ArmKinematics()
+    p = pipe(kinematics=kin)
+    fastest = 0.0
+    for _ in range(int(seconds / DT)):
+        pose = kin.fk(q)
+        w = 1.5 * rotation_error(target.quat_wxyz, pose.quat_wxyz)
+        w *= min(1.0, 0.4 / max(float(np.linalg.norm(w)), 1e-12))
+        r = p.filter(np.concatenate((np.zeros(3), w)), pose, joints=q)
+        qdot = kin.joint_velocities(q, r.twist)
+        fastest = max(fastest, float(np.max(np.abs(qdot))))
+        q = q + qdot * DT
+    return q, float(quat_angle(target.quat_wxyz, kin.fk(q).quat_wxyz)), fastest
+
+
+def test_a_user_rotating_at_the_wrist_singularity_gets_through_it():
+    """Scene 1 ``cup:side`` through the daemon (session 4): the arm arrived next to the cup with joint 5
+    at 0.12 rad while the side grasp needs the wrist turned across it. Slowing the whole command (MoveIt
+    Servo) held it there until the timeout (1.2 rad of rotation left); removing only the part toward the
+    singularity lets the rest of the user's rotation carry the wrist across joint 5 = 0, at joint
+    speeds far below the arm's limits."""
+    from sa_daemon.arm.kinematics import ArmKinematics
+    from sa_daemon.arm.reach import reachable_scene
+    from sa_daemon.planner.scene import load_scene
+
+    kin = ArmKinematics()
+    scene = reachable_scene(load_scene("scene1"), kin, CFG.joint_margin_rad)
+    side = scene.goal("cup:side").desired_pose(scene.start, 0.05)
+    q_trap = np.array([0.141, -0.677, -0.313, 1.319, 0.118, -1.351])
+    assert pipe(kinematics=kin)._condition(q_trap) > CFG.singularity_slow
+    q, left, fastest = _align_through_the_pipeline(q_trap, side)
+    assert left < math.pi / 48
+    assert q[4] < 0.0  # the wrist went through joint 5 = 0
+    assert fastest < 1.0  # rad/s, against 2.14 rad/s limits

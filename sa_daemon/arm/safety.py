@@ -10,9 +10,11 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
 6. ``accel_limited`` - the change from the last output is scaled (direction of the change kept) so no
    axis accelerates beyond ``linear_accel_mps2``/``angular_accel_radps2``.
 7. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
-8. ``singularity_slow``/``singularity_halt`` - scale ``1 - (k - slow) / (stop - slow)`` when the
-   Jacobian condition number ``k`` is above ``slow`` and the command moves toward the singularity; zero
-   at ``stop``. The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first:
+8. ``singularity_slow``/``singularity_halt`` - when the Jacobian condition number ``k`` is above
+   ``slow`` and the command moves toward the singularity, its component along the weakest direction
+   ``u`` is scaled by ``1 - (k - slow) / (stop - slow)``, and removed at ``stop``; the rest of the
+   command passes (MoveIt Servo scales the whole command, which also held the motion that would have
+   carried the xArm's wrist across joint 5 = 0, and trapped users there: ``docs/arm.md``). The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first:
    the condition number of a mixed-unit Jacobian depends on the unit of length, and at the xArm-6's
    0.3 m links this makes a well-conditioned pose read about 15. "Toward" is MoveIt Servo's test: the
    weakest output direction ``u`` of the Jacobian (its smallest singular value), signed so that a
@@ -195,10 +197,19 @@ class SafetyPipeline:
     def singularity_share(self, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
         """``(k, share)``: the condition number at ``q`` (rad) and the share of ``twist`` (m/s, rad/s)
         along the weakest output direction, signed positive toward the singularity (stage 8)."""
-        return self._share(self._normalised_jacobian(q), q, twist)
+        kappa, u = self._weak_direction(self._normalised_jacobian(q), q)
+        tn = self._normalised_twist(twist)
+        norm = float(np.linalg.norm(tn))
+        return kappa, (float(u @ tn) / norm if norm > 0 else 0.0)
 
-    def _share(self, jac: FloatArray, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
-        """:meth:`singularity_share` with the normalised Jacobian at ``q`` already computed."""
+    def _normalised_twist(self, twist: FloatArray) -> FloatArray:
+        tn = np.array(twist, dtype=float)
+        tn[:3] /= self.cfg.characteristic_length_m
+        return tn
+
+    def _weak_direction(self, jac: FloatArray, q: FloatArray) -> tuple[float, FloatArray]:
+        """``(k, u)``: the condition number of the normalised Jacobian ``jac`` at ``q`` and its weakest
+        output direction (unit, normalised twist space), signed toward the singularity."""
         u_mat, sing, _ = np.linalg.svd(jac)
         kappa = float(sing[0] / sing[-1]) if sing[-1] > 0 else float("inf")
         u = u_mat[:, -1]
@@ -207,10 +218,7 @@ class SafetyPipeline:
         step = 0.01 / max(float(np.max(np.abs(probe))), 1e-12)  # at most 0.01 rad per joint
         if np.linalg.cond(self._normalised_jacobian(q + step * probe)) < kappa:
             u = -u
-        tn = np.array(twist, dtype=float)
-        tn[:3] /= self.cfg.characteristic_length_m
-        norm = float(np.linalg.norm(tn))
-        return kappa, (float(u @ tn) / norm if norm > 0 else 0.0)
+        return kappa, u
 
     def _joint_stages(self, t: FloatArray, q: FloatArray, codes: list[SafetyCode]) -> FloatArray:
         kin = self.kinematics
@@ -221,13 +229,18 @@ class SafetyPipeline:
         jac = self._normalised_jacobian(q)  # once per tick: the share below reuses it
         kappa = float(np.linalg.cond(jac))
         if kappa > c.singularity_slow:
-            kappa, share = self._share(jac, q, t)
-            if share > c.singularity_share:  # moving toward the singularity
-                if kappa >= c.singularity_stop:
-                    codes.append(SafetyCode.SINGULARITY_HALT)
-                    return ZERO.copy()
-                codes.append(SafetyCode.SINGULARITY_SLOW)
-                t = t * (1.0 - (kappa - c.singularity_slow) / (c.singularity_stop - c.singularity_slow))
+            kappa, u = self._weak_direction(jac, q)
+            tn = self._normalised_twist(t)
+            along = float(u @ tn)
+            if along > c.singularity_share * float(np.linalg.norm(tn)):  # moving toward the singularity
+                halt = kappa >= c.singularity_stop
+                codes.append(SafetyCode.SINGULARITY_HALT if halt else SafetyCode.SINGULARITY_SLOW)
+                keep = 0.0 if halt else 1.0 - (kappa - c.singularity_slow) / (c.singularity_stop - c.singularity_slow)
+                # Only the part toward the singularity is slowed (removed at the stop): the rest of the
+                # command needs nothing the singularity takes away and passes.
+                tn = tn - (1.0 - keep) * along * u
+                t = tn.copy()
+                t[:3] *= c.characteristic_length_m
         qdot = kin.joint_velocities(q, t)
         near_lo = (q - kin.lower < c.joint_margin_rad) & (qdot < 0)
         near_hi = (kin.upper - q < c.joint_margin_rad) & (qdot > 0)
