@@ -13,15 +13,19 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry import FloatArray, Pose
 from ..planner.goals import Goal
 from ..planner.scene import Scene
-from .kinematics import ArmKinematics, IKError, start_configuration
+
+if TYPE_CHECKING:  # Pinocchio (about 50 MB resident) loads only for arms with joints
+    from .kinematics import ArmKinematics
 
 log = logging.getLogger(__name__)
+
 
 def reaches(kin: ArmKinematics, pose: Pose, q_start: FloatArray, margin_rad: float) -> bool:
     """True if IK seeded at ``q_start`` puts the TCP at ``pose`` with every joint at least ``margin_rad``
@@ -31,6 +35,8 @@ def reaches(kin: ArmKinematics, pose: Pose, q_start: FloatArray, margin_rad: flo
     by the other branch (joint 4 turned by pi, joint 5 mirrored) cannot be reached by driving from the
     start, since joint 5 meets its -1.69 rad bound on the way.
     """
+    from .kinematics import IKError
+
     try:
         q = kin.ik(pose, q_start, tol_m=1e-4, tol_rad=1e-3)
     except IKError:
@@ -43,6 +49,8 @@ def reachable_scene(scene: Scene, kin: ArmKinematics, margin_rad: float) -> Scen
 
     Raises ``ValueError`` naming the goal if one keeps no pose: that task cannot be done on this arm.
     """
+    from .kinematics import start_configuration
+
     q_start = start_configuration(kin, scene.start)
     goals: list[Goal] = []
     for g in scene.goals:
