@@ -128,6 +128,17 @@ def matrix_to_rpy(m: FloatArray) -> tuple[float, float, float]:
     return 0.0, pitch, math.atan2(-float(m[0, 1]), float(m[1, 1]))
 
 
+def _locked(attr: str) -> property:
+    """A read-only property returning ``self.<attr>`` under the fake's lock (the SDK's state is read
+    from its report thread; so is the fake's)."""
+
+    def get(self: Any) -> Any:
+        with self._lock:
+            return getattr(self, attr)
+
+    return property(get)
+
+
 class FakeXArmAPI:
     """A strict in-process xArm controller behind the ``XArmAPI`` method names (rules: module docstring).
 
@@ -290,36 +301,19 @@ class FakeXArmAPI:
             self._advance()
             return self._speed.copy()
 
-    @property
-    def gripper_position(self) -> float:
-        with self._lock:
-            return self._gripper_pos
-
-    @property
-    def gripper_enabled(self) -> bool:
-        with self._lock:
-            return self._gripper_enabled
-
-    @property
-    def enabled(self) -> bool:
-        with self._lock:
-            return self._enabled
+    gripper_position = _locked("_gripper_pos")  # mm
+    gripper_enabled = _locked("_gripper_enabled")
+    enabled = _locked("_enabled")
 
     # -- SDK properties -------------------------------------------------------------------------------
 
-    @property
-    def connected(self) -> bool:
-        with self._lock:
-            return self._connected
+    connected = _locked("_connected")
 
     @property
     def default_is_radian(self) -> bool:
         return self._is_radian
 
-    @property
-    def mode(self) -> int:
-        with self._lock:
-            return self._mode
+    mode = _locked("_mode")
 
     @property
     def state(self) -> int:
@@ -327,15 +321,8 @@ class FakeXArmAPI:
             self._advance()
             return self._state_code()
 
-    @property
-    def error_code(self) -> int:
-        with self._lock:
-            return self._error
-
-    @property
-    def warn_code(self) -> int:
-        with self._lock:
-            return self._warn
+    error_code = _locked("_error")
+    warn_code = _locked("_warn")
 
     @property
     def has_error(self) -> bool:
