@@ -279,6 +279,10 @@ class ZmqConfig(_Section):
     cmd: str = Field("tcp://127.0.0.1:5556", min_length=1, description="command endpoint (REQ clients)")
     max_request_bytes: int = Field(65536, ge=256, description="longer requests are refused")
     max_json_depth: int = Field(8, ge=1, le=64, description="deeper requests are refused")
+    max_requests_per_tick: int = Field(
+        16, ge=1, le=10000,
+        description="command requests answered per control period at most; the rest wait in ZeroMQ's queue",
+    )
     curve_server_secret: str = Field(
         "", description="daemon: its CURVE secret key file (DIR/server.key_secret); '' = CURVE off, cmd loopback only"
     )

@@ -28,6 +28,7 @@ and ``t`` (the daemon's clock, s since its start, when the command took effect):
     calls NAME [SINCE]  the fake SDK's calls of NAME (daemon clock t >= SINCE)
     speed               the fake controller's velocity in force now
     loop_hang S         block the daemon's event loop S seconds; report the fake's speed meanwhile
+    loop_stuck W        block the daemon's event loop for good; report the fake's speed over W seconds
     speech_fail | speech_hang | speech_ok   the engine's utterances from now on raise / block / work
     now                 the daemon's clock
 
@@ -43,6 +44,7 @@ import faulthandler
 import json
 import math
 import os
+import resource
 import signal
 import struct
 import sys
@@ -387,28 +389,44 @@ def _calls(args: list[str]) -> dict:
 
 def _loop_hang(args: list[str]) -> dict:
     """Block the event loop (no control tick, so no new command) and watch the fake's speed."""
-    seconds = float(args[0])
-    d, arm = FD.daemon, FD.arm
+    return _block_loop(float(args[0]), float(args[0]))
+
+
+def _loop_stuck(args: list[str]) -> dict:
+    """Block the event loop for good (the process is stuck until something kills it); watch the fake's
+    speed for ``args[0]`` s and reply while the loop stays blocked."""
+    return _block_loop(math.inf, float(args[0]))
+
+
+def _block_loop(seconds: float, watch_s: float) -> dict:
+    d = FD.daemon
+    arm = FD.arms[-1] if FD.arms else None
     blocked = threading.Event()
 
     def block() -> None:
         blocked.set()
-        time.sleep(seconds)
+        if math.isinf(seconds):
+            threading.Event().wait()
+        else:
+            time.sleep(seconds)
 
     d._loop.call_soon_threadsafe(block)
     if not blocked.wait(10.0):
         raise RuntimeError("the event loop did not run the blocking call")
     t_block = time.monotonic()
     zero_at = None
-    while time.monotonic() < t_block + seconds:
-        if zero_at is None and not any(arm.speed):
+    while time.monotonic() < t_block + watch_s:
+        if zero_at is None and arm is not None and not any(arm.speed):
             zero_at = time.monotonic()
         time.sleep(0.0002)
-    vc = [c for c in arm.calls_named("vc_set_cartesian_velocity") if c.t <= t_block + seconds]
+    out: dict[str, Any] = {"blocked_at": round(t_block - d.t0, 6), "blocked_mono": t_block}
+    if arm is None:
+        return out
+    vc = [c for c in arm.calls_named("vc_set_cartesian_velocity") if c.t <= t_block + watch_s]
     last_moving = next((c for c in reversed(vc) if any(c.args[0]) and c.result == 0), None)
     sent_during = [c for c in vc if c.t > t_block]
     return {
-        "blocked_at": round(t_block - d.t0, 6),
+        **out,
         "zero_at": None if zero_at is None else round(zero_at - d.t0, 6),
         "last_moving_command": None if last_moving is None else {
             "t": round(last_moving.t - d.t0, 6), "speeds": last_moving.args[0],
@@ -462,6 +480,8 @@ def handle(line: str) -> dict:
         return {"speed": [float(v) for v in FD.arm.speed]}
     if cmd == "loop_hang":
         return _loop_hang(args)
+    if cmd == "loop_stuck":
+        return _loop_stuck(args)
     if cmd in ("speech_fail", "speech_hang", "speech_ok"):
         return _speech(cmd.removeprefix("speech_"))
     raise ValueError(f"unknown faultd command {cmd!r}")
@@ -486,6 +506,8 @@ def main(argv: list[str]) -> int:
     own, cli_argv = parser.parse_args(argv[:split]), argv[split + 1:]
     FD.speech_init_fail = own.speech_init == "fail"
     faulthandler.register(signal.SIGUSR1, all_threads=True)  # the tests ask for stacks when a start hangs
+    # A daemon the tests abort (SIGABRT, as systemd's watchdog does) leaves no core file behind.
+    resource.setrlimit(resource.RLIMIT_CORE, (0, resource.getrlimit(resource.RLIMIT_CORE)[1]))
     install_evdev()
     install_xarm()
     install_speech()

@@ -3,6 +3,8 @@ pytest puts this folder on ``sys.path``)."""
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import os
 import queue
@@ -13,7 +15,7 @@ import sys
 import threading
 import time
 import wave
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +66,41 @@ def wav_stats(path: str | Path) -> tuple[int, int, int, float, float]:
     samples = np.frombuffer(frames, dtype="<i2").astype(float) if width == 2 else np.zeros(1)
     rms = float(np.sqrt(np.mean(samples**2))) if samples.size else 0.0
     return ch, width, rate, n / rate if rate else 0.0, rms
+
+
+@contextlib.contextmanager
+def small_disk(path: Path, size: str = "1m") -> Iterator[Path]:
+    """A real, small filesystem (tmpfs of ``size``) mounted on ``path``: its writes fail with ``ENOSPC``
+    once it is full, as a full disk's do. Skips the test where mounting is not allowed (not root)."""
+    import pytest
+
+    path.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size},mode=0755", "tmpfs", str(path)],
+                       capture_output=True, text=True, check=False)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here (needs root): {r.stderr.strip()}")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True, check=False)
+
+
+def fill_disk(path: Path) -> int:
+    """Fill the filesystem of ``path`` (a file ``filler`` in it) until a write fails with ENOSPC; bytes
+    written."""
+    fd = os.open(path / "filler", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    n = 0
+    try:
+        for chunk in (1 << 16, 1 << 12, 1):
+            try:
+                while True:
+                    n += os.write(fd, b"\0" * chunk)
+            except OSError as e:
+                if e.errno != errno.ENOSPC:
+                    raise
+    finally:
+        os.close(fd)
+    return n
 
 
 class Collector(threading.Thread):

@@ -11,6 +11,7 @@ control rate, ``/event``) and the state stream; each test prints its figures (``
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import math
@@ -19,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -27,7 +29,16 @@ from typing import Any
 import numpy as np
 import pytest
 import zmq
-from helpers import CLI, FAULTD, START_TIMEOUT_S, DaemonProc, free_port, process_gone
+from helpers import (
+    CLI,
+    FAULTD,
+    START_TIMEOUT_S,
+    DaemonProc,
+    fill_disk,
+    free_port,
+    process_gone,
+    small_disk,
+)
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -852,7 +863,9 @@ def test_xarm_stops_by_itself_when_the_daemon_stops_commanding(tmp_path):
     duration = CFG.arm.xarm.command_periods / CFG.runtime.control_hz
     assert calls and all(abs(c["kwargs"]["duration"] - duration) < 1e-12 for c in calls)
     last = r["last_moving_command"]
-    assert last is not None and last["speeds"][0] > 0 and r["moving_commands_during"] == 0
+    assert last is not None and last["speeds"][0] > 0
+    # The driver's SDK thread may still send the one command it had in hand when the loop stopped.
+    assert r["moving_commands_during"] <= 1 and last["t"] <= r["blocked_at"] + 5e-3, r
     assert r["zero_at"] is not None, "the arm kept moving while no command came"
     stop_after_last = r["zero_at"] - last["t"]
     assert duration - 1e-3 <= stop_after_last <= duration + 2e-3, stop_after_last
@@ -887,6 +900,255 @@ def test_sigkill_of_an_xarm_daemon_keeps_the_recording_up_to_the_last_flush(tmp_
     assert lost <= CFG.record.flush_s + 0.3, f"the last {lost:.2f} s were lost"
     figure("sigkill", f"recording readable up to {lost:.2f} s before the kill (record.flush_s "
            f"{CFG.record.flush_s} s), {len(states)} states; the planner worker exited by itself")
+
+
+# -- the disk under the recorder fills up ---------------------------------------------------------------
+
+
+def test_full_disk_under_the_recorder_is_reported_and_the_arm_stays_controlled(tmp_path):
+    """The recording lives on a real, small filesystem (a 1 MiB tmpfs) that another file fills while the
+    xArm moves: the next write fails with ENOSPC. The daemon goes on commanding the arm (and obeys a
+    stop), reports the failure once (an error line, a ``fault`` event with source ``recorder``, ``status``
+    ``record.error``), nothing hangs, SIGTERM exits 0, and the recording reads back up to its last
+    complete flush before the disk filled."""
+    with small_disk(tmp_path / "disk", "1m") as disk:
+        rec = disk / "rec.mcap"
+        d = xarm_daemon(tmp_path / "d", "--record", str(rec))
+        try:
+            d.wait_ready()
+            c = d.collector
+            moving(d)
+            c.state(lambda s: s["t"] >= 3.0, timeout_s=30, what="3 s of recording")
+            i_fill = len(c)
+            t_fill = d.fault("now")["t"]
+            filler_bytes = fill_disk(disk)
+            _, ev = c.event("fault", timeout_s=10 * CFG.record.flush_s, start=i_fill, source="recorder")
+            assert ev["detail"].startswith("recording stopped: No space left on device (ENOSPC) writing "), ev
+            st_ = d.request({"cmd": "status"})
+            assert st_["record"]["error"] == ev["detail"] and st_["record"]["path"] == str(rec)
+            flushed = st_["record"]["flushed"]
+            assert f"the {flushed} messages before it are readable" in ev["detail"]
+            # Still controlling the arm: the held stick keeps it moving, then a stop holds it.
+            _, s = c.state(lambda s: s["t"] > ev["t"] + 1.0, timeout_s=10, start=i_fill)
+            assert s["command_twist"][0] > 0 and s["arm"]["fault"] is None and s["safety"] != "stopped"
+            moves = [m for m in accepted_moving(d.fault(f"calls {VC} {ev['t']}")["calls"]) if m["t"] <= s["t"]]
+            assert len(moves) >= 0.5 * (s["t"] - ev["t"]) / CONTROL_S, f"{len(moves)} commands in {s['t'] - ev['t']:.2f} s"
+            i_stop = len(c)
+            assert d.request({"cmd": "stop"})["ok"]
+            _, stopped = c.event("stop", timeout_s=10, start=i_stop)
+            _, s = c.state(lambda s: s["t"] > stopped["t"] + 0.1, timeout_s=10, start=i_stop)
+            assert s["command_twist"] == ZERO6 and s["safety"] == "stopped"
+            assert d.fault("speed")["speed"] == ZERO6
+            assert d.request({"cmd": "status"})["record"]["dropped"] > 0  # recording stays off, quietly
+            t_term = time.monotonic()
+            assert d.stop(signal.SIGTERM, timeout_s=20) == 0
+            exit_s = time.monotonic() - t_term
+        finally:
+            d.close()
+        states, events, _ = recording(rec)
+        size = rec.stat().st_size
+    log = (d.dir / "stderr.txt").read_text(errors="replace")
+    assert "Traceback" not in log and "Exception in thread" not in log, log[-3000:]
+    assert log.count(" ERROR ") == 1 and f"ERROR sa_daemon: {ev['detail']}" in log, log[-3000:]
+    assert exit_s < 10.0, f"SIGTERM took {exit_s:.1f} s"
+    # What reached the disk before it filled reads back: from the start, without a gap, and all of it.
+    assert states and states[0]["t"] < 1.0 and [e for e in events if e["type"] == "ready"]
+    ts = [s["t"] for s in states]
+    assert ts == sorted(ts) and max_gap(ts) <= 0.1
+    assert len(states) + len(events) == flushed
+    lost_s = t_fill - ts[-1]
+    assert ts[-1] <= ev["t"] and lost_s <= CFG.record.flush_s + 0.3, f"the last {lost_s:.2f} s before the fill were lost"
+    figure("full_disk", f"ENOSPC (a 1 MiB tmpfs filled by {filler_bytes // 1024} KiB of another file): reported "
+           f"{ev['t'] - t_fill:.2f} s after the disk filled (record.flush_s {CFG.record.flush_s} s), one error line "
+           f"and a fault event; the arm commanded on ({len(moves)} moving commands in the next "
+           f"{s['t'] - ev['t']:.1f} s) and stopped on request; SIGTERM exit 0 in {exit_s:.1f} s; recording "
+           f"({size // 1024} KiB) readable up to {lost_s:.2f} s before the disk filled, {len(states)} states")
+
+
+# -- the systemd watchdog kills a stuck daemon ------------------------------------------------------------
+
+UNIT = Path(__file__).resolve().parents[1] / "systemd" / "sa-daemon.service"
+
+
+def _unit_seconds(name: str) -> float | None:
+    for line in UNIT.read_text().splitlines():
+        k, _, v = line.partition("=")
+        if k.strip() == name and v.strip():
+            return float(v.strip().removesuffix("s"))
+    return None
+
+
+def _descendants(pid: int) -> list[int]:
+    """The processes started by ``pid`` (its control group, as far as this test is concerned)."""
+    children: dict[int, list[int]] = {}
+    for p in Path("/proc").iterdir():
+        if p.name.isdigit():
+            try:
+                ppid = int((p / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(p.name))
+    out, todo = [], [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+class FakeSystemd:
+    """systemd's side of ``Type=notify`` with ``WatchdogSec=`` for one service, over a real notify socket.
+
+    As systemd does: the daemon gets ``NOTIFY_SOCKET`` and ``WATCHDOG_USEC`` (the unit's ``WatchdogSec``);
+    the watchdog is armed at ``READY=1``; when no ``WATCHDOG=1`` came for ``WatchdogSec``, the service is
+    killed with the watchdog signal (SIGABRT, followed by SIGCONT so that a stopped process gets it) sent to
+    the main process and the rest of its control group (``KillMode=control-group``), and whatever is still
+    alive ``TimeoutAbortSec`` later (unset in the unit: ``TimeoutStopSec``) gets SIGKILL. A thread stamps
+    each datagram on arrival.
+    """
+
+    def __init__(self) -> None:
+        self.watchdog_s = _unit_seconds("WatchdogSec")
+        assert self.watchdog_s, "the unit has no WatchdogSec"
+        self.abort_timeout_s = _unit_seconds("TimeoutAbortSec") or _unit_seconds("TimeoutStopSec") or 90.0
+        name = f"sa-daemon-test-{uuid.uuid4().hex}"
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind("\0" + name)
+        self.sock.settimeout(0.02)
+        self.env = {"NOTIFY_SOCKET": "@" + name, "WATCHDOG_USEC": str(round(self.watchdog_s * 1e6))}
+        self.msgs: list[tuple[float, bytes]] = []  # (arrival, datagram)
+        self._halt = threading.Event()
+        self._thread = threading.Thread(target=self._receive, daemon=True, name="test-fake-systemd")
+        self._thread.start()
+
+    def _receive(self) -> None:
+        while not self._halt.is_set():
+            try:
+                data = self.sock.recv(4096)
+            except TimeoutError:
+                continue
+            self.msgs.append((time.monotonic(), data))
+
+    def _times(self, field: bytes) -> list[float]:
+        return [at for at, m in list(self.msgs) if field in m.split(b"\n")]
+
+    def pings(self) -> list[float]:
+        return self._times(b"WATCHDOG=1")
+
+    def wait_ready(self, timeout_s: float = START_TIMEOUT_S) -> float:
+        end = time.monotonic() + timeout_s
+        while not (ready := self._times(b"READY=1")):
+            assert time.monotonic() < end, "no READY=1"
+            time.sleep(0.02)
+        return ready[0]
+
+    def supervise(self, proc: subprocess.Popen, until_s: float) -> dict[str, Any]:
+        """Run the watchdog until it fires (or ``until_s`` passes); then kill as systemd would."""
+        armed = self.wait_ready()
+        end = time.monotonic() + until_s
+        while True:
+            last = max([armed, *self.pings()])
+            if time.monotonic() - last >= self.watchdog_s:
+                break
+            if time.monotonic() > end:
+                return {"fired": False}
+            time.sleep(0.005)
+        t_abort = time.monotonic()
+        group = _descendants(proc.pid)
+        for pid in [proc.pid, *group]:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGABRT)
+                os.kill(pid, signal.SIGCONT)
+        killed = False
+        try:
+            rc = proc.wait(self.abort_timeout_s)
+        except subprocess.TimeoutExpired:
+            killed = True
+            for pid in [proc.pid, *group]:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            rc = proc.wait(10)
+        return {"fired": True, "last_ping": last, "t_abort": t_abort, "exit_s": time.monotonic() - t_abort,
+                "rc": rc, "sigkill": killed, "group": group}
+
+    def close(self) -> None:
+        self._halt.set()
+        self._thread.join(5)
+        self.sock.close()
+
+
+@pytest.mark.parametrize("how", ["loop_blocked", "sigstop"])
+def test_systemd_watchdog_kills_a_stuck_daemon_and_the_arm_stops_by_itself(tmp_path, how):
+    """The daemon runs under a fake systemd (the unit's WatchdogSec and timeouts, a real notify socket)
+    with the fake xArm moving. It gets stuck - its event loop blocked for good (a hang inside the
+    process), or the whole process stopped (SIGSTOP, what a stuck process looks like from outside). Its
+    WATCHDOG=1 pings stop; a watchdog period after the last one "systemd" sends SIGABRT (+ SIGCONT) to the
+    service's processes, and SIGKILL after TimeoutAbortSec if needed. While it is healthy it pings well
+    within WatchdogSec. The arm stops by itself (the command duration) long before the watchdog fires,
+    and the recording reads back up to the last flush before the stall (all of it while the recorder's
+    thread still runs)."""
+    sd = FakeSystemd()
+    d = faultd(tmp_path / "d", "--method", "manual", "--duration", "600", "--no-speech", "--record", "wd.mcap",
+               config=XARM_CONFIG, arm="xarm", env=sd.env)
+    group: list[int] = []
+    try:
+        d.wait_ready()
+        t_ready = sd.wait_ready()
+        moving(d)
+        d.collector.state(lambda s: s["t"] >= 3.0 and s["command_twist"][0] > 0.1, timeout_s=30,
+                          what="3 s up, moving at full speed")
+        healthy = [t_ready, *sd.pings()]
+        assert len(healthy) >= 3, sd.msgs
+        worst_healthy_gap = max_gap(healthy)
+        arm = None
+        if how == "loop_blocked":
+            arm = d.fault(f"loop_stuck {2 * CONTROL_S + 3 * CFG.arm.xarm.command_periods / CFG.runtime.control_hz}")
+            t_stuck = arm["blocked_mono"]
+            t_stuck_daemon = arm["blocked_at"]
+        else:
+            t_stuck_daemon = d.fault("now")["t"]
+            t_stuck = time.monotonic()
+            os.kill(d.proc.pid, signal.SIGSTOP)
+        res = sd.supervise(d.proc, until_s=3 * sd.watchdog_s + 10)
+        group = res.get("group", [])
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(d.proc.pid, signal.SIGCONT)
+        d.close()
+        sd.close()
+    assert res["fired"], "the watchdog never fired: the daemon kept pinging while stuck"
+    late_pings = [t - t_stuck for t in sd.pings() if t > t_stuck]
+    assert all(dt <= 0.05 for dt in late_pings), f"pings {late_pings} s after the daemon got stuck"
+    assert t_stuck - res["last_ping"] <= sd.watchdog_s / 2 + 0.1, "it had stopped pinging before the stall"
+    fired_s = res["t_abort"] - t_stuck
+    assert fired_s <= sd.watchdog_s + 0.2, fired_s
+    assert worst_healthy_gap < 0.6 * sd.watchdog_s, f"a healthy daemon went {worst_healthy_gap:.2f} s without a ping"
+    assert res["rc"] == -signal.SIGABRT and not res["sigkill"], res  # SIGCONT let even a stopped one take it
+    assert group and all(process_gone(p) for p in group), "a process of the service outlived the abort"
+    if arm is not None:
+        duration = CFG.arm.xarm.command_periods / CFG.runtime.control_hz
+        last = arm["last_moving_command"]
+        assert last is not None and last["duration"] == pytest.approx(duration)
+        # The driver's SDK thread may still send the one command it had in hand when the loop stopped.
+        assert arm["moving_commands_during"] <= 1 and last["t"] <= arm["blocked_at"] + 5e-3, arm
+        assert arm["zero_at"] is not None, "the arm kept moving while the daemon was stuck"
+        assert duration - 1e-3 <= arm["zero_at"] - last["t"] <= duration + 2e-3, arm
+        stop_s = arm["zero_at"] - arm["blocked_at"]
+        assert stop_s <= duration + CONTROL_S + 2e-3, stop_s
+    states, events, _ = recording(tmp_path / "d" / "wd.mcap")
+    assert states and states[0]["t"] < 1.0 and [e for e in events if e["type"] == "ready"]
+    ts = [s["t"] for s in states]
+    assert ts == sorted(ts) and max_gap(ts) <= 0.1
+    lost_s = t_stuck_daemon - ts[-1]
+    if how == "loop_blocked":  # the writer thread flushed everything queued before the stall
+        assert lost_s <= 2 * CONTROL_S, f"the last {lost_s:.2f} s before the stall were lost"
+    else:  # the whole process stopped: up to the last flush
+        assert lost_s <= CFG.record.flush_s + 0.3, f"the last {lost_s:.2f} s before the stop were lost"
+    figure(f"watchdog[{how}]", f"WatchdogSec {sd.watchdog_s:g} s: healthy pings at most {worst_healthy_gap:.2f} s "
+           f"apart; none after the stall; SIGABRT {fired_s:.2f} s after the stall, dead {res['exit_s'] * 1e3:.0f} ms "
+           f"later (no SIGKILL needed; TimeoutAbortSec {sd.abort_timeout_s:g} s), {len(group)} child processes gone; "
+           + (f"arm speed zero {stop_s * 1e3:.1f} ms after the stall; " if arm is not None else "")
+           + f"recording readable up to {lost_s * 1e3:.0f} ms before the stall")
 
 
 # -- malformed traffic on the command socket --------------------------------------------------------------
@@ -1033,8 +1295,12 @@ def test_huge_requests_are_refused_or_dropped_by_zeromq_and_the_client_recovers(
 
 def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     """20000 requests as fast as 4 DEALER sockets can send them, a third malformed: every one gets exactly
-    one reply (a refusal with its reason, or the answer); the state stream keeps >= 20 Hz without a gap
-    over 200 ms; status answers as fast afterwards."""
+    one reply, in order (a refusal with its reason, or the answer); the daemon answers at most
+    zmq.max_requests_per_tick per control period, the rest waiting in ZeroMQ's queue, so the control loop keeps
+    its time: by the daemon's own counters, at most 1 % of the control periods during the flood overran
+    1.5 periods (the bench target is 0.1 % on a quiet machine; the old unthrottled loop showed a p99 of
+    11-34 ms). A ``stop`` from another client during the flood is not queued behind it; the state stream
+    keeps >= 20 Hz without a gap over 200 ms; status answers as fast afterwards."""
     c = target.collector
 
     def status_ms(n: int = 20) -> float:
@@ -1053,6 +1319,7 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     try:
         for dl in dealers:  # connected before the clock starts
             assert dl.ask(b'{"cmd":"status"}') is not None
+        s0 = target.request({"cmd": "status"})
         i0 = len(c)
         t_start_ns, t0 = time.time_ns(), time.monotonic()
         for k in range(per):
@@ -1061,11 +1328,15 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
                 dl.send(raw)
                 sent[j].append(raw)
         t_sent = time.monotonic() - t0
+        # The carer's stop while the flood waits: the command socket serves its connections in turn.
+        t_stop = time.monotonic()
+        stop = target.request({"cmd": "stop"}, timeout_s=30.0)
+        stop_ms = (time.monotonic() - t_stop) * 1e3
         replies: list[list[dict]] = [[] for _ in dealers]
         poller = zmq.Poller()
         for dl in dealers:
             poller.register(dl.sock, zmq.POLLIN)
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 120
         while any(len(r) < per for r in replies):
             assert time.monotonic() < deadline, [len(r) for r in replies]
             ready = dict(poller.poll(100))
@@ -1074,6 +1345,7 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
                     replies[j].append(r)
         t_all = time.monotonic() - t0
         t_end_ns = time.time_ns()
+        s1 = target.request({"cmd": "status"})
         extra = [dl.recv(0.5) for dl in dealers]
         assert extra == [None] * len(dealers), "more replies than requests"
     finally:
@@ -1082,6 +1354,12 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     for j in range(len(dealers)):
         for raw, reply in zip(sent[j], replies[j]):  # in order, one each
             check_reply(raw, reply)
+    assert stop == {"ok": True}, stop
+    st_stopped = [m for m in c.slice(i0, topic="state") if m["stopped"]]
+    assert st_stopped, "no state showed the stop"
+    held = [m for m in st_stopped if m["t"] >= st_stopped[0]["t"] + 2 * CONTROL_S]
+    assert held and all(m["command_twist"] == ZERO6 for m in held), "the stop was not obeyed"
+    assert target.request({"cmd": "resume"})["ok"]
     after_ms = status_ms()
     c.state(lambda s: True, timeout_s=5, start=len(c))
     got = c.received(i0, topic="state")
@@ -1092,6 +1370,23 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     assert rate >= 20.0, f"{rate:.1f} Hz during the flood"
     assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     assert after_ms <= max(3 * before_ms, before_ms + 5.0), (before_ms, after_ms)
+    # The stop waited for its turn among the connections, not behind the 20000 queued requests.
+    assert stop_ms <= 0.25 * t_all * 1e3, (stop_ms, t_all)
+
+    # The daemon's own figures between the two status requests (its clock, its counters).
+    span_s = s1["uptime_s"] - s0["uptime_s"]
+    handled = s1["commands"]["requests"] - s0["commands"]["requests"]
+    assert handled == len(dealers) * per + 2  # the flood, the stop, and this status
+    per_tick = s0["commands"]["per_tick"]
+    assert per_tick == Config().zmq.max_requests_per_tick
+    ticks = s1["control"]["ticks"] - s0["control"]["ticks"]
+    overruns = s1["control"]["overruns"] - s0["control"]["overruns"]
+    skipped = s1["control"]["skipped"] - s0["control"]["skipped"]
+    assert ticks >= 0.8 * span_s / CONTROL_S, f"{ticks} control ticks in {span_s:.2f} s"
+    assert overruns <= 0.01 * ticks, f"{overruns} of {ticks} control periods over {1.5 * CONTROL_S * 1e3:.0f} ms"
+    assert handled <= per_tick * (span_s / CONTROL_S + 1), f"{handled} requests in {span_s:.2f} s"
+    assert s1["commands"]["deferred"] > s0["commands"]["deferred"], "the flood was never held back"
+
     deadline = time.monotonic() + 10 * CFG.record.flush_s
     while max(log_ns := recording(target.dir / "fuzz.mcap")[2]) <= t_end_ns:  # until the file has the flood
         assert time.monotonic() < deadline, "the recording stopped growing"
@@ -1101,7 +1396,9 @@ def test_flood_of_requests_every_one_answered_no_pause_no_slowdown(target):
     p99 = float(np.percentile(periods, 99)) if len(periods) else 0.0
     assert len(periods) >= 0.8 * t_all / CONTROL_S - 2, f"{len(periods)} control ticks in {t_all:.2f} s"
     figure("flood", f"{per * len(dealers)} requests ({per * len(dealers) // 3} malformed) from {len(dealers)} "
-           f"DEALERs sent in {t_sent:.2f} s, all answered in {t_all:.2f} s ({per * len(dealers) / t_all:.0f}/s); "
-           f"state stream {rate:.0f} Hz, largest gap {gap_t * 1e3:.0f} ms (daemon clock), {gap_rx * 1e3:.0f} ms "
-           f"(arrival); control period p99 "
-           f"{p99 * 1e3:.1f} ms, max {periods.max() * 1e3:.1f} ms during it; status round trip {before_ms:.1f} ms before, {after_ms:.1f} ms after")
+           f"DEALERs sent in {t_sent:.2f} s, all answered in {t_all:.2f} s ({per * len(dealers) / t_all:.0f}/s, "
+           f"at most {per_tick} per control period); control: {overruns} of {ticks} periods over 1.5 T "
+           f"({skipped} ticks skipped), recorded periods p99 {p99 * 1e3:.1f} ms, max {periods.max() * 1e3:.1f} ms; "
+           f"a stop during the flood answered in {stop_ms:.0f} ms; state stream {rate:.0f} Hz, largest gap "
+           f"{gap_t * 1e3:.0f} ms (daemon clock), {gap_rx * 1e3:.0f} ms (arrival); status round trip "
+           f"{before_ms:.1f} ms before, {after_ms:.1f} ms after")

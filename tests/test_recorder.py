@@ -7,6 +7,7 @@ import shutil
 import time
 from pathlib import Path
 
+from helpers import fill_disk, small_disk
 from mcap.reader import make_reader
 
 from sa_daemon.io.recorder import Recorder, read_recording
@@ -176,3 +177,37 @@ def test_a_bad_message_is_dropped_and_recording_goes_on(tmp_path):
     assert [s["i"] for s in states] == [0, 1]
     with open(tmp_path / "t.mcap", "rb") as f:
         assert make_reader(f).get_summary().statistics.message_count == 2  # finished: summary written
+
+
+def test_a_full_disk_stops_the_recording_reports_once_and_keeps_what_was_flushed(tmp_path):
+    """A real ENOSPC (a 256 KiB tmpfs filled by another file): the writer thread neither dies with a
+    traceback nor blocks; ``error`` and ``on_error`` say why (once); ``add`` and ``close`` return at once;
+    the file is cut back to its last complete flush and reads back exactly the flushed messages."""
+    errors: list[str] = []
+    with small_disk(tmp_path / "disk", "256k") as disk:
+        rec = Recorder(disk / "run.mcap", flush_s=0.05, on_error=errors.append)
+        try:
+            for i in range(100):
+                rec.add("/state", _state(i))
+            _until(lambda: rec.flushed == 100, what="the first 100 on disk")
+            fill_disk(disk)
+            i = 100
+            while not errors:  # the next chunk that needs a new page of the full disk fails
+                rec.add("/state", _state(i))
+                i += 1
+                time.sleep(0.002)
+                assert i < 20000, "no write failed on a full disk"
+            flushed = rec.flushed
+            t0 = time.monotonic()
+            for j in range(50):
+                rec.add("/state", _state(i + j))  # dropped at once, never queued
+        finally:
+            rec.close()
+        close_s = time.monotonic() - t0
+        assert errors == [rec.error] and "No space left on device (ENOSPC)" in rec.error, errors
+        assert f"the {flushed} messages before it are readable" in rec.error
+        assert close_s < 1.0 and not rec._thread.is_alive()
+        got = [m["i"] for topic, _, m in read_recording(disk / "run.mcap") if topic == "/state"]
+        assert got == list(range(flushed)) and flushed >= 100
+        assert rec.dropped >= 50 and rec.written + rec.dropped >= i + 50 - 1
+        assert (disk / "run.mcap").stat().st_size == rec._good_size  # no torn chunk left at the end

@@ -5,15 +5,23 @@ can plot any field. Encoding and disk writes happen in one writer thread fed by 
 on the event loop; the writer flushes a finished chunk at least every ``flush_s`` seconds, so a crash
 (even SIGKILL) loses at most about that much. :func:`read_recording` reads a finished file, and also
 one cut short by a crash, up to its last complete chunk.
+
+A write that fails (a full disk: ``ENOSPC``; any ``OSError``) ends the recording, never the caller:
+the file is closed and cut back to its last complete flush (so what was on disk before stays readable,
+without a torn chunk at its end), :attr:`Recorder.error` says why, ``on_error`` is called once (from
+the writer thread), and later messages are counted as dropped. The writer thread keeps draining its
+queue, so :meth:`Recorder.add` and :meth:`Recorder.close` never wait on it.
 """
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import queue
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -55,14 +63,23 @@ _STOP = object()
 
 
 class Recorder:
-    """Write ``/state`` and ``/event`` messages to ``path`` from a background thread."""
+    """Write ``/state`` and ``/event`` messages to ``path`` from a background thread.
 
-    def __init__(self, path: str | Path, flush_s: float = 1.0, max_queue: int = 10000) -> None:
+    ``on_error(text)`` is called once, from the writer thread, when a write fails and the recording
+    stops (see the module doc).
+    """
+
+    def __init__(self, path: str | Path, flush_s: float = 1.0, max_queue: int = 10000,
+                 on_error: Callable[[str], None] | None = None) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.flush_s = flush_s
         self.dropped = 0
-        self.written = 0
+        self.written = 0  # messages handed to the MCAP writer
+        self.flushed = 0  # of those, the ones in chunks flushed to the file without an error
+        #: Why the recording stopped early (a failed write), else ``None``.
+        self.error: str | None = None
+        self._on_error = on_error
         self._q: queue.Queue = queue.Queue(maxsize=max_queue)
         self._file = open(self.path, "wb")  # noqa: SIM115 - owned by the writer thread
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
@@ -73,17 +90,30 @@ class Recorder:
             ids[topic] = self._writer.register_channel(topic, "json", sid)
         self._channels = ids
         self._writer.flush()
+        self._good_size = self._file.tell()  # the file up to its last complete flush
         self._thread = threading.Thread(target=self._run, name="sa-recorder", daemon=True)
         self._thread.start()
 
     def add(self, topic: str, msg: dict[str, Any], t_ns: int | None = None) -> None:
-        """Queue ``msg`` on ``topic`` (``/state`` or ``/event``); never blocks (drops when full)."""
+        """Queue ``msg`` on ``topic`` (``/state`` or ``/event``); never blocks (drops when full, and
+        once the recording has stopped on a write error)."""
+        if self.error is not None:
+            self.dropped += 1
+            return
         try:
             self._q.put_nowait((topic, time.time_ns() if t_ns is None else t_ns, msg))
         except queue.Full:
             self.dropped += 1
 
     def _run(self) -> None:
+        try:
+            self._write_until_stopped()
+        except OSError as e:
+            self._fail(e)
+            while self._q.get() is not _STOP:  # drained, so that neither add() nor close() waits
+                self.dropped += 1
+
+    def _write_until_stopped(self) -> None:
         last_flush = time.monotonic()
         while True:
             try:
@@ -102,15 +132,46 @@ class Recorder:
                     self.dropped += 1
             if time.monotonic() - last_flush >= self.flush_s:
                 self._writer.flush()
+                self._flushed_ok()
                 last_flush = time.monotonic()
         self._writer.finish()
         self._file.close()
+        self.flushed = self.written
 
-    def close(self) -> None:
-        """Write what is queued, finish the file (summary and footer) and close it. Idempotent."""
+    def _flushed_ok(self) -> None:
+        self.flushed = self.written
+        self._good_size = self._file.tell()
+
+    def _fail(self, e: OSError) -> None:
+        """A write failed: close the file, cut it back to its last complete flush, report once."""
+        code = errno.errorcode.get(e.errno, str(e.errno)) if e.errno is not None else type(e).__name__
+        self.dropped += self.written - self.flushed
+        try:
+            self._file.close()  # (flushing what is buffered fails again: the cut below removes it)
+        except OSError:
+            pass
+        try:
+            os.truncate(self.path, self._good_size)  # frees, never needs space
+        except OSError:
+            pass
+        self.error = (f"recording stopped: {e.strerror or e} ({code}) writing {self.path}; "
+                      f"the {self.flushed} messages before it are readable")
+        if self._on_error is not None:
+            try:
+                self._on_error(self.error)
+            except Exception:  # noqa: BLE001, S110 - a reporting failure must not kill the writer thread
+                pass
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Write what is queued, finish the file (summary and footer) and close it. Idempotent.
+        Waits at most about ``timeout_s`` for the writer thread (a write blocked in the kernel cannot hold
+        the daemon's shutdown)."""
         if self._thread.is_alive():
-            self._q.put(_STOP)
-            self._thread.join()
+            try:
+                self._q.put(_STOP, timeout=timeout_s)
+            except queue.Full:
+                return
+            self._thread.join(timeout_s)
 
 
 def read_recording(path: str | Path) -> Iterator[tuple[str, int, dict[str, Any]]]:

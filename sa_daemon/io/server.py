@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -59,6 +60,8 @@ class ZmqServer:
         self.dropped = 0
         self.requests = 0
         self.refused = 0
+        #: Windows whose request budget ran out (:meth:`serve` with ``batch``): the flood had to wait.
+        self.deferred = 0
         self.pub = self.ctx.socket(zmq.PUB)
         self.pub.setsockopt(zmq.SNDHWM, 200)
         self.pub.setsockopt(zmq.LINGER, 0)
@@ -93,15 +96,29 @@ class ZmqServer:
         except zmq.Again:
             self.dropped += 1
 
-    async def serve(self, handler: Handler) -> None:
-        """Answer commands forever (cancel to stop). A handler exception becomes ``ok: false``."""
+    async def serve(self, handler: Handler, batch: int | None = None, period_s: float | None = None) -> None:
+        """Answer commands forever (cancel to stop). A handler exception becomes ``ok: false``.
+
+        With ``batch`` and ``period_s``, at most ``batch`` requests are answered per ``period_s`` (the
+        daemon passes its control period): when a window's budget is spent, this task sleeps until the
+        window ends, and the requests behind it wait in ZeroMQ's queue (libzmq then stops reading the
+        peers' connections: back-pressure, nothing dropped). Each request is still answered exactly once,
+        in the order of its connection. A request that arrives while the socket is idle is answered at
+        once. Between two requests the task yields, so a due timer waits for one request at most.
+        """
+        window_end = 0.0
+        in_window = 0
         while True:
             frames = await self.cmd.recv_multipart()
+            now = time.monotonic()
+            if period_s is not None and now >= window_end:
+                window_end, in_window = now + period_s, 0
             if len(frames) < 2:
                 continue
             # REQ envelope: [identity, b"", payload]; a DEALER may omit the empty delimiter.
             envelope, payload = frames[:-1], frames[-1]
             self.requests += 1
+            in_window += 1
             try:
                 req = protocol.parse_request(payload, self.max_request_bytes, self.max_json_depth)
                 reply = protocol.encode({"ok": True, **handler(req)})
@@ -116,7 +133,11 @@ class ZmqServer:
                 await self.cmd.send_multipart([*envelope, reply], flags=zmq.NOBLOCK)
             except zmq.ZMQError:
                 pass  # the client went away
-            await asyncio.sleep(0)
+            if batch is not None and period_s is not None and in_window >= batch:
+                self.deferred += 1  # budget spent: the rest waits for the next window
+                await asyncio.sleep(max(0.0, window_end - time.monotonic()))
+            else:
+                await asyncio.sleep(0)
 
     def close(self, linger_s: float = 0.2) -> None:
         """Close both sockets; the PUB socket gets ``linger_s`` to deliver the last events (a stuck

@@ -10,7 +10,8 @@ Loops (rates in ``[runtime]``), all on one event loop, none of them waiting on a
 * **control** (``control_hz``) - recomputes the chosen action's twist from the current pose and
   joystick, blends, runs the safety pipeline, commands the arm, records, and feeds the watchdog;
 * **publish** (``publish_hz``) - the ``state`` message on the PUB socket;
-* **commands** - the command socket, answered as requests arrive.
+* **commands** - the command socket, answered as requests arrive, at most ``zmq.max_requests_per_tick``
+  per control period (a flood waits in ZeroMQ's queue instead of taking the event loop).
 
 CPU-heavy work (planning) runs in the worker process; blocking calls (speech, SDK, disk) run in
 threads owned by their modules. A tick's own work is small (a belief update is ~0.1 ms, a control
@@ -132,6 +133,7 @@ class Daemon:
         self._last_watchdog = 0.0
         self._ready_sent = False  # WATCHDOG=1 only after READY=1
         self._heartbeat: dict[str, float] = {}
+        self._record_error_reported = False
         self.sim: SimInput | None = None
         self.joystick: Any = None
         self.server: ZmqServer | None = None
@@ -249,6 +251,20 @@ class Daemon:
                 seconds=round(s.seconds, 3), error=s.error,
             ))
 
+    def _on_record_error(self, text: str) -> None:
+        """(The recorder's writer thread.) A write failed, e.g. the disk is full: the recording has
+        stopped; the daemon goes on controlling the arm and says so."""
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(self._record_failed, text)
+
+    def _record_failed(self, text: str) -> None:
+        if self._record_error_reported:
+            return
+        self._record_error_reported = True
+        log.error("%s", text)
+        self.event("fault", source="recorder", detail=text)
+
     # -- commands ----------------------------------------------------------------------------------------
 
     def stop_arm(self, source: str) -> None:
@@ -305,7 +321,36 @@ class Daemon:
             "scene": self.opts.scene.name,
             "task": self.sim.task if self.sim is not None else None,
             "pid": os.getpid(),
+            "control": self._control_dict(),
+            "commands": self._commands_dict(),
+            "record": self._record_dict(),
         }
+
+    def _control_dict(self) -> dict[str, Any]:
+        """The control loop's own timing counters since READY (``docs/protocol.md``, ``status``)."""
+        r = self.rates.get("control")
+        st = r.stats if r is not None else None
+        return {
+            "ticks": st.ticks if st is not None else 0,
+            "overruns": st.overruns if st is not None else 0,
+            "skipped": st.skipped if st is not None else 0,
+        }
+
+    def _commands_dict(self) -> dict[str, Any]:
+        s = self.server
+        return {
+            "requests": s.requests if s is not None else 0,
+            "refused": s.refused if s is not None else 0,
+            "deferred": s.deferred if s is not None else 0,
+            "per_tick": self.cfg.zmq.max_requests_per_tick,
+        }
+
+    def _record_dict(self) -> dict[str, Any] | None:
+        r = self.recorder
+        if r is None:
+            return None
+        return {"path": str(r.path), "written": r.written, "flushed": r.flushed, "dropped": r.dropped,
+                "error": r.error}
 
     def _planner_dict(self) -> dict[str, Any]:
         w = self.worker
@@ -647,7 +692,9 @@ class Daemon:
                 asyncio.create_task(self._input_loop(), name="input"),
                 asyncio.create_task(self._planner_loop(), name="planner"),
                 asyncio.create_task(self._publish_loop(), name="publish"),
-                asyncio.create_task(self.server.serve(self.handle), name="commands"),  # type: ignore[union-attr]
+                asyncio.create_task(self.server.serve(  # type: ignore[union-attr]
+                    self.handle, self.cfg.zmq.max_requests_per_tick, 1.0 / self.cfg.runtime.control_hz),
+                    name="commands"),
             ]
             if self.joystick is not None:
                 tasks.append(asyncio.create_task(self.joystick.run(), name="joystick"))
@@ -711,7 +758,7 @@ class Daemon:
         if opts.record:
             path = opts.record.replace("{time}", time.strftime("%Y%m%d-%H%M%S"))
             try:
-                self.recorder = Recorder(path, cfg.record.flush_s)
+                self.recorder = Recorder(path, cfg.record.flush_s, on_error=self._on_record_error)
             except OSError as e:
                 raise OSError(f"record.path (--record) {path}: cannot write: {e.strerror or e}") from None
         if cfg.speech.enabled:
@@ -757,6 +804,8 @@ class Daemon:
             self.speaker.close(timeout_s=1.0)
         if self.recorder is not None:
             self.recorder.close()
+            if self.recorder.error is not None:  # (finishing the file failed: the loop may not run again)
+                self._record_failed(self.recorder.error)
         if self.server is not None:
             self.server.close()
             self.server = None  # a late callback (an utterance ended by the speaker's close) publishes nothing
