@@ -184,6 +184,10 @@ class RuntimeConfig(_Section):
     worker_hang_s: float = Field(0.5, gt=0, description="a planner silent this long past its deadline is killed (s)")
     worker_start_timeout_s: float = Field(30.0, gt=0, description="time a new planner worker has to come up (s)")
     worker_nice: int = Field(5, ge=0, le=19, description="niceness added to the planner worker (lower priority)")
+    realtime_priority: int = Field(
+        0, ge=0, le=99,
+        description="SCHED_FIFO priority of the event-loop thread once running (0 = off; needs root or LimitRTPRIO)",
+    )
 
 
 class SafetyConfig(_Section):

@@ -25,9 +25,7 @@ import functools
 import gc
 import logging
 import math
-import os
 import signal
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,7 +37,6 @@ from ..arm.base import Arm, ArmState
 from ..arm.factory import make_arm
 from ..arm.safety import SafetyPipeline, SafetyResult
 from ..config import Config
-from ..io import protocol
 from ..io.notify import Notifier
 from ..io.protocol import TOPIC_EVENT, TOPIC_STATE, Request, RequestError
 from ..io.recorder import Recorder
@@ -53,7 +50,10 @@ from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
 from ..speech.speaker import Speaker, Spoken, question_text
-from .rate import FixedRate, PeriodStats, Ring
+from . import messages
+from .rate import FixedRate, Ring
+from .console import Console
+from .realtime import make_realtime
 from .siminput import SimInput
 
 log = logging.getLogger("sa_daemon")
@@ -134,6 +134,8 @@ class Daemon:
         self._ready_sent = False  # WATCHDOG=1 only after READY=1
         self._heartbeat: dict[str, float] = {}
         self._record_error_reported = False
+        self.console = Console()  # event and progress lines (stderr), written off the event loop
+        self.realtime_refused: str | None = None  # why runtime.realtime_priority could not be applied
         self.sim: SimInput | None = None
         self.joystick: Any = None
         self.server: ZmqServer | None = None
@@ -170,7 +172,7 @@ class Daemon:
         self.events_sent += 1
         if self.opts.progress and kind not in ("plan",):
             detail = " ".join(f"{k}={v}" for k, v in fields.items())
-            print(f"[{msg['t']:7.2f}] {kind} {detail}", file=sys.stderr, flush=True)
+            self.console.write(f"[{msg['t']:7.2f}] {kind} {detail}")
 
     # -- input -------------------------------------------------------------------------------------------
 
@@ -277,7 +279,7 @@ class Daemon:
     def handle(self, req: Request) -> dict[str, Any]:
         """Answer one validated command (``docs/protocol.md``)."""
         if req.cmd == "status":
-            return self.status()
+            return messages.status(self)
         if req.cmd == "answer":
             self.answer(req.args["value"] == "yes", source="command")
             return {}
@@ -304,63 +306,6 @@ class Daemon:
         if not spec.planned:
             self.planner_status = WorkerStatus.IDLE
         self.event("method", method=method)
-
-    def status(self) -> dict[str, Any]:
-        return {
-            "version": protocol.PROTOCOL_VERSION,
-            "method": self.method,
-            "arm": self.arm.name if self.arm is not None else self.opts.arm,
-            "arm_fault": self.arm_state.fault if self.arm_state is not None else None,
-            "arm_status": self.arm.status() if self.arm is not None else {},
-            "input": self.opts.input,
-            "input_connected": self.input_connected,
-            "planner": self._planner_dict(),
-            "stopped": bool(self.safety and self.safety.stopped),
-            "assist": self.assist,
-            "uptime_s": round(self.now(), 3),
-            "scene": self.opts.scene.name,
-            "task": self.sim.task if self.sim is not None else None,
-            "pid": os.getpid(),
-            "control": self._control_dict(),
-            "commands": self._commands_dict(),
-            "record": self._record_dict(),
-        }
-
-    def _control_dict(self) -> dict[str, Any]:
-        """The control loop's own timing counters since READY (``docs/protocol.md``, ``status``)."""
-        r = self.rates.get("control")
-        st = r.stats if r is not None else None
-        return {
-            "ticks": st.ticks if st is not None else 0,
-            "overruns": st.overruns if st is not None else 0,
-            "skipped": st.skipped if st is not None else 0,
-        }
-
-    def _commands_dict(self) -> dict[str, Any]:
-        s = self.server
-        return {
-            "requests": s.requests if s is not None else 0,
-            "refused": s.refused if s is not None else 0,
-            "deferred": s.deferred if s is not None else 0,
-            "per_tick": self.cfg.zmq.max_requests_per_tick,
-        }
-
-    def _record_dict(self) -> dict[str, Any] | None:
-        r = self.recorder
-        if r is None:
-            return None
-        return {"path": str(r.path), "written": r.written, "flushed": r.flushed, "dropped": r.dropped,
-                "error": r.error}
-
-    def _planner_dict(self) -> dict[str, Any]:
-        w = self.worker
-        return {
-            "pid": w.pid if w is not None else None,
-            "status": self.planner_status.value,
-            "last_plan_ms": round(self.last_plan_ms, 3),
-            "restarts": w.restarts if w is not None else 0,
-            "plans": self.plans,
-        }
 
     # -- planner -----------------------------------------------------------------------------------------
 
@@ -577,7 +522,7 @@ class Daemon:
             arm.step(dt)
         self.command, self.safety_result = cmd, result
         if self.recorder is not None:
-            self.recorder.add("/state", self._record_state(cmd, result, state))
+            self.recorder.add("/state", messages.record_state(self, cmd, result, state))
         self._watchdog(sent)
 
     def _watchdog(self, mono: float) -> None:
@@ -591,61 +536,6 @@ class Daemon:
 
     # -- state messages ----------------------------------------------------------------------------------
 
-    def _belief_list(self) -> list[dict[str, Any]]:
-        tp = self.belief.target_probabilities()
-        return [{"goal": g, "p": float(p)} for g, p in tp.items()]  # unrounded: sums to 1 within 1e-12
-
-    def _action_dict(self, action: Action) -> dict[str, Any]:
-        d: dict[str, Any] = {"kind": action.kind.value}
-        if action.target is not None:
-            d["goal"] = action.target
-        return d
-
-    def state_message(self) -> dict[str, Any]:
-        """The ``state`` message of ``docs/protocol.md``."""
-        st = self.arm_state
-        cmd, res = self.command, self.safety_result
-        pose = st.pose.as_dict() if st is not None else None
-        action = self.current_action(time.monotonic())
-        return {
-            "v": protocol.PROTOCOL_VERSION,
-            "t": round(self.now(), 4),
-            "mode": self.mode.value,
-            "user_twist": protocol.finite_list(self.user_twist if self.input_fresh() else np.zeros(6)),
-            "robot_twist": protocol.finite_list(cmd.robot_twist),
-            "command_twist": protocol.finite_list(res.twist),
-            "gripper_pose": pose,
-            "gripper_closed": self.gripper_closed,
-            "belief": self._belief_list(),
-            "action": self._action_dict(action),
-            "question": self.question.text if self.question is not None else None,
-            "planner": self._planner_dict(),
-            "safety": res.status.value,
-            "safety_codes": [c.value for c in res.codes],
-            "method": self.method,
-            "assist": self.assist,
-            "stopped": bool(self.safety and self.safety.stopped),
-            "arm": {"backend": self.arm.name if self.arm else self.opts.arm, "fault": st.fault if st else None},
-            "input": {"backend": self.opts.input, "connected": self.input_connected, "fresh": self.input_fresh()},
-            "task": self.sim.task if self.sim is not None else None,
-        }
-
-    def _record_state(self, cmd: Command, res: SafetyResult, st: ArmState) -> dict[str, Any]:
-        tp = self.belief.target_probabilities()
-        return {
-            "t": round(self.now(), 4),
-            "mode": self.mode.value,
-            "user_twist": self.user_twist.tolist(),
-            "robot_twist": cmd.robot_twist.tolist(),
-            "command_twist": res.twist.tolist(),
-            "gripper_pose": st.pose.as_dict(),
-            "belief": {g: float(p) for g, p in tp.items()},
-            "action": cmd.action.label,
-            "opposed": bool(cmd.opposed),
-            "safety": res.status.value,
-            "question": self.question.target if self.question is not None else None,
-        }
-
     async def _publish_loop(self) -> None:
         rate = self.rates["publish"]
         last_progress = 0.0
@@ -653,22 +543,10 @@ class Daemon:
             mono = await rate.tick()
             self._heartbeat["publish"] = mono
             if self.server is not None and self.arm_state is not None:
-                self.server.publish(TOPIC_STATE, self.state_message())
+                self.server.publish(TOPIC_STATE, messages.state_message(self))
             if self.opts.progress and mono - last_progress >= 1.0 and self.arm_state is not None:
                 last_progress = mono
-                self._print_progress()
-
-    def _print_progress(self) -> None:
-        tp = self.belief.target_probabilities()
-        top = max(tp, key=tp.__getitem__)
-        p = self.arm_state.pose.position if self.arm_state else np.zeros(3)
-        print(
-            f"[{self.now():7.2f}] {self.current_action(time.monotonic()).label:<22} "
-            f"belief {top} {tp[top]:.2f}  tcp ({p[0]:+.3f} {p[1]:+.3f} {p[2]:+.3f}) m  "
-            f"{self.mode.value:<11} planner {self.planner_status.value} {self.last_plan_ms:.1f} ms  "
-            f"safety {self.safety_result.status.value}",
-            file=sys.stderr, flush=True,
-        )
+                messages.print_progress(self)
 
     # -- lifecycle ---------------------------------------------------------------------------------------
 
@@ -703,8 +581,11 @@ class Daemon:
             # collection never has to walk it during a control tick.
             gc.collect()
             gc.freeze()
+            self.realtime_refused = make_realtime(self.cfg.runtime.realtime_priority)
+            if self.realtime_refused is not None:
+                log.warning("%s", self.realtime_refused)
             for r in self.rates.values():  # loop figures are of the running daemon, not its start-up
-                r.stats = PeriodStats(r.period_s)
+                r.reset_stats()
             self.latency_ms.clear()
             self.tick_work_ms.clear()
             self._ready_sent = True
@@ -810,6 +691,7 @@ class Daemon:
             self.server.close()
             self.server = None  # a late callback (an utterance ended by the speaker's close) publishes nothing
         self.notifier.close()
+        self.console.close()
 
     # -- figures -----------------------------------------------------------------------------------------
 

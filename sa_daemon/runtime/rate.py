@@ -116,6 +116,12 @@ class FixedRate:
         """The nominal period (s)."""
         return self.period_s
 
+    def reset_stats(self) -> None:
+        """Start the figures afresh: the next tick starts a period instead of closing one, so a
+        start-up pause before it (a full garbage collection) is not counted as the running loop's."""
+        self.stats = PeriodStats(self.period_s)
+        self._last = None
+
     async def tick(self) -> float:
         """Sleep until the next grid point; return the time (``time.monotonic``, s) it was reached."""
         now = time.monotonic()
