@@ -299,6 +299,24 @@ def accepted_moving(calls: list[dict]) -> list[dict]:
     return [c for c in calls if nonzero(c["args"][0]) and c["result"] == 0]
 
 
+def assert_stopped_by_duration(r: dict) -> tuple[float, float]:
+    """Checks on faultd's report of a stalled event loop (``loop_hang``/``loop_stuck``): the fake
+    controller zeroed the speed one command duration after the last moving command, and no later than a
+    control period plus that duration after the stall. Returns (s after the last command, s after the
+    stall)."""
+    duration = CFG.arm.xarm.command_periods / CFG.runtime.control_hz
+    last = r["last_moving_command"]
+    assert last is not None and last["speeds"][0] > 0 and last["duration"] == pytest.approx(duration)
+    # The driver's SDK thread may still send the one command it had in hand when the loop stopped.
+    assert r["moving_commands_during"] <= 1 and last["t"] <= r["blocked_at"] + 5e-3, r
+    assert r["zero_at"] is not None, "the arm kept moving while no command came"
+    stop_after_last = r["zero_at"] - last["t"]
+    assert duration - 1e-3 <= stop_after_last <= duration + 2e-3, stop_after_last
+    stop_after_block = r["zero_at"] - r["blocked_at"]
+    assert stop_after_block <= duration + CONTROL_S + 2e-3, stop_after_block
+    return stop_after_last, stop_after_block
+
+
 def resume_and_move(d: DaemonProc, since: float) -> tuple[float, float]:
     """Nothing moved since ``since``; ``resume`` re-enables the arm and the held stick moves it again.
     Returns (daemon t of the resume request, latency to the first accepted moving command, s)."""
@@ -862,15 +880,7 @@ def test_xarm_stops_by_itself_when_the_daemon_stops_commanding(tmp_path):
     clean_log(d)
     duration = CFG.arm.xarm.command_periods / CFG.runtime.control_hz
     assert calls and all(abs(c["kwargs"]["duration"] - duration) < 1e-12 for c in calls)
-    last = r["last_moving_command"]
-    assert last is not None and last["speeds"][0] > 0
-    # The driver's SDK thread may still send the one command it had in hand when the loop stopped.
-    assert r["moving_commands_during"] <= 1 and last["t"] <= r["blocked_at"] + 5e-3, r
-    assert r["zero_at"] is not None, "the arm kept moving while no command came"
-    stop_after_last = r["zero_at"] - last["t"]
-    assert duration - 1e-3 <= stop_after_last <= duration + 2e-3, stop_after_last
-    stop_after_block = r["zero_at"] - r["blocked_at"]
-    assert stop_after_block <= duration + CONTROL_S + 2e-3
+    stop_after_last, stop_after_block = assert_stopped_by_duration(r)
     figure("xarm_deadman", f"every command carries duration {duration * 1e3:.0f} ms ({len(calls)} checked); "
            f"no command for 0.5 s: the controller's speed is zero {stop_after_block * 1e3:.1f} ms after the "
            f"daemon stalled, {stop_after_last * 1e3:.1f} ms after the last command")
@@ -1126,15 +1136,7 @@ def test_systemd_watchdog_kills_a_stuck_daemon_and_the_arm_stops_by_itself(tmp_p
     assert res["rc"] == -signal.SIGABRT and not res["sigkill"], res  # SIGCONT let even a stopped one take it
     assert group and all(process_gone(p) for p in group), "a process of the service outlived the abort"
     if arm is not None:
-        duration = CFG.arm.xarm.command_periods / CFG.runtime.control_hz
-        last = arm["last_moving_command"]
-        assert last is not None and last["duration"] == pytest.approx(duration)
-        # The driver's SDK thread may still send the one command it had in hand when the loop stopped.
-        assert arm["moving_commands_during"] <= 1 and last["t"] <= arm["blocked_at"] + 5e-3, arm
-        assert arm["zero_at"] is not None, "the arm kept moving while the daemon was stuck"
-        assert duration - 1e-3 <= arm["zero_at"] - last["t"] <= duration + 2e-3, arm
-        stop_s = arm["zero_at"] - arm["blocked_at"]
-        assert stop_s <= duration + CONTROL_S + 2e-3, stop_s
+        _, stop_s = assert_stopped_by_duration(arm)
     states, events, _ = recording(tmp_path / "d" / "wd.mcap")
     assert states and states[0]["t"] < 1.0 and [e for e in events if e["type"] == "ready"]
     ts = [s["t"] for s in states]

@@ -197,7 +197,9 @@ class SafetyPipeline:
     def singularity_share(self, q: FloatArray, twist: FloatArray) -> tuple[float, float]:
         """``(k, share)``: the condition number at ``q`` (rad) and the share of ``twist`` (m/s, rad/s)
         along the weakest output direction, signed positive toward the singularity (stage 8)."""
-        kappa, u = self._weak_direction(self._normalised_jacobian(q), q)
+        jac = self._normalised_jacobian(q)
+        kappa, u = self._weakest(jac)
+        u = self._signed_toward(jac, q, kappa, u)
         tn = self._normalised_twist(twist)
         norm = float(np.linalg.norm(tn))
         return kappa, (float(u @ tn) / norm if norm > 0 else 0.0)
@@ -207,18 +209,19 @@ class SafetyPipeline:
         tn[:3] /= self.cfg.characteristic_length_m
         return tn
 
-    def _weak_direction(self, jac: FloatArray, q: FloatArray) -> tuple[float, FloatArray]:
-        """``(k, u)``: the condition number of the normalised Jacobian ``jac`` at ``q`` and its weakest
-        output direction (unit, normalised twist space), signed toward the singularity."""
+    @staticmethod
+    def _weakest(jac: FloatArray) -> tuple[float, FloatArray]:
+        """``(k, u)``: the condition number of the normalised Jacobian ``jac`` and its weakest output
+        direction (unit, normalised twist space, sign arbitrary), from one SVD."""
         u_mat, sing, _ = np.linalg.svd(jac)
         kappa = float(sing[0] / sing[-1]) if sing[-1] > 0 else float("inf")
-        u = u_mat[:, -1]
-        # Which way along u is "toward"? A small joint step realising +u: does k grow?
+        return kappa, u_mat[:, -1]
+
+    def _signed_toward(self, jac: FloatArray, q: FloatArray, kappa: float, u: FloatArray) -> FloatArray:
+        """``u`` signed toward the singularity: does a small joint step realising ``+u`` raise ``k``?"""
         probe = np.linalg.pinv(jac) @ u
         step = 0.01 / max(float(np.max(np.abs(probe))), 1e-12)  # at most 0.01 rad per joint
-        if np.linalg.cond(self._normalised_jacobian(q + step * probe)) < kappa:
-            u = -u
-        return kappa, u
+        return -u if np.linalg.cond(self._normalised_jacobian(q + step * probe)) < kappa else u
 
     def _joint_stages(self, t: FloatArray, q: FloatArray, codes: list[SafetyCode]) -> FloatArray:
         kin = self.kinematics
@@ -226,10 +229,10 @@ class SafetyPipeline:
         if not np.any(t):
             return t
         c = self.cfg
-        jac = self._normalised_jacobian(q)  # once per tick: the share below reuses it
-        kappa = float(np.linalg.cond(jac))
+        jac = self._normalised_jacobian(q)  # once per tick, and one SVD gives k and the weak direction
+        kappa, u = self._weakest(jac)
         if kappa > c.singularity_slow:
-            kappa, u = self._weak_direction(jac, q)
+            u = self._signed_toward(jac, q, kappa, u)
             tn = self._normalised_twist(t)
             along = float(u @ tn)
             if along > c.singularity_share * float(np.linalg.norm(tn)):  # moving toward the singularity

@@ -129,7 +129,7 @@ class Belief:
             return self.goals.target_mask(self.confirmed)
         if not self.ruled_out:
             return None
-        free = ~np.isin(np.array(self.goals.targets)[self.goals.target_index], list(self.ruled_out))
+        free = ~np.any([self.goals.target_mask(t) for t in self.ruled_out], axis=0)
         return free if free.any() else None  # every target denied (a wrong answer): trust the joystick
 
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:

@@ -51,8 +51,8 @@ from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
 from ..speech.speaker import Speaker, Spoken, question_text
 from . import messages
-from .rate import FixedRate, Ring
 from .console import Console
+from .rate import FixedRate, Ring
 from .realtime import make_realtime
 from .siminput import SimInput
 
@@ -534,7 +534,7 @@ class Daemon:
             n.notify("WATCHDOG=1")
             self._last_watchdog = mono
 
-    # -- state messages ----------------------------------------------------------------------------------
+    # -- publishing (messages.py builds the messages) ---------------------------------------------------
 
     async def _publish_loop(self) -> None:
         rate = self.rates["publish"]
