@@ -188,6 +188,11 @@ class RuntimeConfig(_Section):
         0, ge=0, le=99,
         description="SCHED_FIFO priority of the event-loop thread once running (0 = off; needs root or LimitRTPRIO)",
     )
+    gil_switch_interval_s: float = Field(
+        5e-4, gt=0, le=0.1,
+        description="the longest a thread holds the interpreter lock while another waits for it (s; Python's default "
+                    "is 5 ms, half a control period)",
+    )
 
 
 class SafetyConfig(_Section):

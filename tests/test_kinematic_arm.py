@@ -227,3 +227,16 @@ def test_reopened_gripper_moves_again_on_a_new_command():
     arm.command_twist([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
     arm.step(1.0)
     np.testing.assert_allclose(arm.read().pose.position, START.position + [0.0, 0.0, 0.05], atol=1e-12)
+
+
+def test_reset_returns_to_the_start_at_rest_with_the_gripper_open():
+    arm = KinematicArm(START, WIDE)
+    arm.command_twist(np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.5]))
+    arm.step(1.0)
+    arm.command_gripper(True)
+    assert arm.reset() is True
+    s = arm.read()
+    assert s.gripper_closed is False
+    assert s.pose.distance(START) == pytest.approx((0.0, 0.0), abs=1e-12)
+    arm.step(1.0)  # the old twist is gone
+    assert arm.read().pose.distance(START) == pytest.approx((0.0, 0.0), abs=1e-12)

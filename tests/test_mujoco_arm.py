@@ -87,6 +87,28 @@ def test_factory_builds_the_mujoco_arm(scene1):
     a.close()  # idempotent
 
 
+def test_reset_gives_the_state_of_a_fresh_arm(arm, scene1):
+    # Between the sim user's tasks the daemon resets the arm instead of recompiling the model.
+    _hold(arm, [0.05, -0.03, -0.04, 0.0, 0.2, 0.1], 1.0)
+    arm.command_gripper(True)
+    arm.step(0.3)
+    assert arm.read().gripper_closed and arm.status()["sim_time_s"] > 1.0
+    assert arm.reset() is True
+    fresh = MujocoArm(scene1, Config())
+    try:
+        np.testing.assert_allclose(arm.data.qpos, fresh.data.qpos, atol=1e-12)  # arm, fingers and objects
+        np.testing.assert_array_equal(arm.data.qvel, 0.0)
+        np.testing.assert_allclose(arm.data.ctrl, fresh.data.ctrl, atol=1e-12)
+        s = arm.read()
+        assert s.gripper_closed is False and arm.status()["sim_time_s"] == 0.0
+        assert s.pose.distance(fresh.read().pose) == pytest.approx((0.0, 0.0), abs=1e-12)
+    finally:
+        fresh.close()
+    arm.step(0.5)  # and it holds still from there, like a fresh arm
+    d_t, d_r = arm.read().pose.distance(scene1.start)
+    assert d_t < 1e-3 and d_r < 1e-3
+
+
 # -- twist tracking ------------------------------------------------------------------------------------
 
 

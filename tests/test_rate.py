@@ -168,3 +168,19 @@ def test_ring_memory_is_fixed_and_it_keeps_the_last_samples():
     assert len(r) == 0
     with pytest.raises(ValueError):
         Ring(0)
+
+
+def test_overruns_keep_when_they_ended_the_latest_only():
+    from sa_daemon.runtime.rate import OVERRUN_TIMES_KEPT, PeriodStats
+
+    s = PeriodStats(0.01)
+    s.add(0.010, at=1.0)
+    s.add(0.016, at=2.0)  # an overrun: > 1.5 periods
+    s.add(0.015, at=3.0)  # exactly 1.5 periods is not
+    s.add(0.020)  # an overrun whose time is unknown is counted only
+    assert s.overruns == 2 and list(s.overrun_at.values()) == [2.0]
+    for k in range(OVERRUN_TIMES_KEPT + 5):
+        s.add(0.03, at=10.0 + k)
+    kept = sorted(s.overrun_at.values())
+    assert s.overruns == OVERRUN_TIMES_KEPT + 7 and len(kept) == OVERRUN_TIMES_KEPT
+    assert kept[-1] == 10.0 + OVERRUN_TIMES_KEPT + 4  # the newest survive

@@ -16,6 +16,8 @@ from pathlib import Path
 import pytest
 from helpers import DaemonProc
 
+from sa_daemon.runtime.realtime import set_switch_interval
+
 CHILD = textwrap.dedent(
     """
     import json, os, subprocess, sys, threading
@@ -94,3 +96,51 @@ def test_the_daemon_runs_its_event_loop_real_time_and_the_planner_does_not(tmp_p
         assert worker and _policy(worker, worker) == os.SCHED_OTHER
     finally:
         d.close()
+
+
+def test_the_daemon_bounds_the_interpreter_lock_hand_over_while_it_runs(tmp_path):
+    # Python's default (5 ms) would let a busy helper thread hold the lock for half a control period.
+    d = DaemonProc(tmp_path, "--no-speech", "--duration", "60", config="[runtime]\ngil_switch_interval_s = 0.0007\n")
+    try:
+        d.wait_ready()
+        assert d.request({"cmd": "status"})["control"]["switch_interval_s"] == pytest.approx(0.0007)
+    finally:
+        d.close()
+
+
+def test_set_switch_interval_returns_the_previous_one_to_restore():
+    before = sys.getswitchinterval()
+    try:
+        assert set_switch_interval(0.0005) == before
+        assert sys.getswitchinterval() == pytest.approx(0.0005)
+    finally:
+        sys.setswitchinterval(before)
+
+
+def test_a_busy_helper_thread_delays_the_loop_by_at_most_about_the_switch_interval():
+    """The mechanism behind ``runtime.gil_switch_interval_s``: a thread waking from a sleep while a
+    pure-Python thread computes waits for the lock for about one switch interval."""
+    code = textwrap.dedent(
+        """
+        import sys, threading, time
+        sys.setswitchinterval(float(sys.argv[1]))
+        stop = False
+        def busy():
+            while not stop:
+                sum(range(1000))
+        threading.Thread(target=busy, daemon=True).start()
+        waits = []
+        for _ in range(100):
+            t = time.perf_counter(); time.sleep(0.002); waits.append(time.perf_counter() - t - 0.002)
+        stop = True
+        print(sorted(waits)[50])
+        """
+    )
+
+    def median_wait(interval_s: float) -> float:  # the median: robust to a rare stall of the machine
+        out = subprocess.run([sys.executable, "-c", code, str(interval_s)], capture_output=True, text=True,
+                             check=True, timeout=60)
+        return float(out.stdout)
+
+    assert median_wait(0.005) > 0.004  # a wake waits for the busy thread's full 5 ms
+    assert median_wait(0.0005) < 0.002

@@ -4,6 +4,7 @@ its figures and its exit code. The timing criteria themselves are the benchmark'
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -74,9 +75,33 @@ def test_soak_reports_the_run(soak):
     assert f["control_ticks"] >= 0.5 * 100 * SOAK_S
     assert f["state_messages_published"] >= 0.5 * 30 * SOAK_S
     assert f["overruns"] >= 0 and f["overrun_pct"] == pytest.approx(100 * f["overruns"] / f["control_ticks"])
+    at = f["overrun_at_s"]
+    assert len(at) == min(f["overruns"], 100) == len(f["overrun_at_monotonic_s"]) and at == sorted(at)
+    assert all(0 < t <= f["duration_s"] for t in at)
     assert 0 <= f["period_err_ms_p99"] <= f["period_err_ms_max"]
     assert f["pub_dropped"] == 0 and f["subscribers"] == {}
     assert f["loop"]["tasks_done"] == f["tasks_done"]
+
+
+def test_soak_reports_the_machines_own_stalls_or_why_not(soak):
+    r, f = soak
+    p = f["platform"]
+    assert "machine stalls > T/2 (probe, all CPUs)" in r.stdout
+    if os.geteuid() != 0:  # the probe needs a real-time priority
+        assert "SCHED_FIFO refused" in p["unavailable"]
+        return
+    assert p["threshold_ms"] == 5.0  # half the 10 ms control period
+    assert p["cpus"] == sorted(os.sched_getaffinity(0))
+    assert all(n >= 0.5 * 1000 * SOAK_S for n in p["wakeups"])  # 1 kHz per CPU through the soak
+    assert p["late_total"] == sum(p["late"]) == len(p["stalls"])
+    # Every overrun is looked up among the stalls; a match overlaps it.
+    assert len(p["overrun_stalls"]) == len(f["overrun_at_monotonic_s"])
+    assert p["overruns_during_stall"] == sum(m is not None for m in p["overrun_stalls"])
+    for t, m in zip(f["overrun_at_monotonic_s"], p["overrun_stalls"]):
+        if m is not None:
+            _, end, late_ms = m
+            assert end - late_ms / 1e3 <= t + 0.002 and end >= t - 0.005 - 0.002
+    assert f"{p['overruns_during_stall']} during a machine stall" in r.stdout
 
 
 def test_soak_too_short_for_its_sampling_exits_2(tmp_path):

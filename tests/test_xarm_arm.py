@@ -162,6 +162,13 @@ def test_fake_ip_uses_the_fake_through_the_factory():
         arm.close()
 
 
+def test_a_real_arm_does_not_reset(arm, fake):
+    # It cannot teleport back to a start pose: the caller must build a fresh driver (and a person must
+    # move the arm).
+    assert arm.reset() is False
+    assert not [c.name for c in fake.calls if c.name.startswith(("set_position", "set_servo", "move_gohome"))]
+
+
 # -- commands -------------------------------------------------------------------------------------------
 
 

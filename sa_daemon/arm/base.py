@@ -88,6 +88,13 @@ class Arm(abc.ABC):
         """Driver diagnostics for the ``status`` command (connection, fault code, counters)."""
         return {}
 
+    def reset(self) -> bool:
+        """Put a simulated arm back in its start state: TCP at the scene's start pose, at rest, gripper
+        open, objects where the scene puts them. Returns ``False`` for an arm that cannot (a real arm
+        does not teleport); the caller then builds a fresh one. Cheap, unlike a rebuild (a MuJoCo model
+        compiles in tens of ms), so the daemon can call it between tasks on the event loop."""
+        return False
+
     def reset_fault(self) -> None:
         """Clear a latched fault and re-enable motion; called only on an explicit ``resume``."""
 

@@ -16,6 +16,7 @@ class KinematicArm(Arm):
 
     def __init__(self, start: Pose, limits: LimitsConfig | None = None) -> None:
         self._limits = limits or LimitsConfig()
+        self._start = start
         self._pos = np.array(start.position)
         self._quat = np.array(start.quat_wxyz)
         self._twist = np.zeros(6)
@@ -23,6 +24,12 @@ class KinematicArm(Arm):
 
     def read(self) -> ArmState:
         return ArmState(Pose(self._pos, self._quat), self._closed)
+
+    def reset(self) -> bool:
+        self._pos, self._quat = np.array(self._start.position), np.array(self._start.quat_wxyz)
+        self._twist = np.zeros(6)
+        self._closed = False
+        return True
 
     def command_twist(self, twist: FloatArray) -> None:
         t = np.asarray(twist, dtype=float)

@@ -89,6 +89,7 @@ class MujocoArm(Arm):
         self._renderer: mujoco.Renderer | None = None
         self._frame = 0
         q0 = start_configuration(self.kinematics, scene.start)
+        self._q0 = q0
         self._place_joints(q0)
         d_t, d_r = self.read().pose.distance(scene.start)
         if d_t > START_TOL_M or d_r > START_TOL_M:
@@ -186,6 +187,15 @@ class MujocoArm(Arm):
         d.ctrl[self._vel_act] = 0.0
         self._clock = float(d.time)
         mujoco.mj_forward(self.model, d)
+
+    def reset(self) -> bool:
+        """Back to the state of a fresh arm: the model's initial state (objects where the scene puts
+        them, clock at 0), then the arm at its start configuration, fingers open. No recompilation."""
+        mujoco.mj_resetData(self.model, self.data)
+        self._twist = np.zeros(6)
+        self._closed = False
+        self._place_joints(self._q0)
+        return True
 
     def place(self, pose: Pose) -> FloatArray:
         """Teleport the TCP to ``pose`` (IK from the current joints), at rest; returns the joints (rad).

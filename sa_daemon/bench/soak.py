@@ -9,6 +9,11 @@ of the daemon's process and of the planner worker sampled every ``--sample-every
   ``(end - start) / start`` in %, and the slope is a least-squares fit over all of them (MB/min).
   The worker is judged on the samples of the worker alive at the end (a restarted worker starts anew).
 * **Overruns**: control periods longer than 1.5 x nominal, counted from READY to the end.
+* **The machine's own stalls** (:mod:`.platform`): unless ``--no-platform-probe``, a pinned
+  real-time sleeper per CPU notes every wake-up later than half a control period, with its time. Such
+  a stall delays any thread on that CPU, the daemon's loop included, and alone makes an overrun. Each
+  overrun is matched against them: ``overruns_during_stall`` counts those that overlap one. Reported,
+  never a criterion: the criterion stays the issue's, every overrun counts.
 * **Criteria** (flags, the issue's values by default): daemon and worker growth <= ``--max-growth-pct``
   (5 %), overruns <= ``--max-overruns`` (0). Each is printed PASS or FAIL; the exit code is 0 when all
   pass and 1 otherwise, so that CI can run a soak as a check. Timing criteria depend on the machine: on a
@@ -23,7 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from ..config import load_config
 from .loop import RssSample, loop_figures, run_daemon, subscriber_rows
+from .platform import PlatformProbe
 
 #: Warm-up is this fraction of the duration, but never longer than WARMUP_MAX_S.
 WARMUP_FRACTION = 0.1
@@ -61,6 +68,11 @@ def memory_figures(rss: list[RssSample], warmup: float) -> tuple[dict[str, Any],
     return daemon, worker
 
 
+def overrun_times(run: Any) -> list[float]:
+    """The control loop's latest overruns (``time.monotonic`` s), oldest first."""
+    return sorted(float(t) for t in run.daemon.rates["control"].stats.overrun_at.values())
+
+
 def _criterion(name: str, value: float | None, limit: float) -> dict[str, Any]:
     """One criterion; a figure that could not be measured fails."""
     return {"name": name, "value": value, "limit": limit, "pass": value is not None and value <= limit}
@@ -72,8 +84,26 @@ def run_soak(args: argparse.Namespace) -> dict[str, Any]:
     if args.sample_every <= 0 or args.duration - warm < 2 * args.sample_every:
         raise ValueError(f"--sample-every {args.sample_every} s leaves fewer than 3 samples after the "
                          f"{warm:.1f} s warm-up of a {args.duration} s soak")
-    run = run_daemon(args, sample_every_s=args.sample_every)
+    probe = None
+    half_period = 0.5 / load_config(args.config).runtime.control_hz
+    if getattr(args, "platform_probe", True):
+        probe = PlatformProbe(half_period)
+        probe.start()
+    try:
+        run = run_daemon(args, sample_every_s=args.sample_every)
+    finally:
+        latency = probe.stop() if probe is not None else None
+    platform: dict[str, Any] = (
+        latency.as_dict() if latency is not None
+        else {"unavailable": probe.unavailable if probe is not None else "--no-platform-probe"}
+    )
     loop = loop_figures(run)
+    overruns_at = overrun_times(run)
+    if latency is not None:
+        matched = [latency.during_stall(t, half_period) for t in overruns_at]
+        platform["overruns_during_stall"] = sum(m is not None for m in matched)
+        platform["overrun_stalls"] = [None if m is None else [m.cpu, round(m.end, 4), round(m.late_s * 1e3, 2)]
+                                      for m in matched]
     daemon_rss, worker_rss = memory_figures(run.rss, warm)
     criteria = [
         _criterion("daemon RSS growth %", daemon_rss["growth_pct"], args.max_growth_pct),
@@ -91,9 +121,13 @@ def run_soak(args: argparse.Namespace) -> dict[str, Any]:
         "worker_rss": worker_rss,
         "overruns": loop["overruns"],
         "overrun_pct": 100.0 * loop["overrun_fraction"],
+        # When they ended: s since the daemon started, and time.monotonic() to match other processes' logs.
+        "overrun_at_s": [round(t - run.daemon.t0, 3) for t in overruns_at],
+        "overrun_at_monotonic_s": [round(t, 4) for t in overruns_at],
         "control_ticks": loop["control_ticks"],
         "period_err_ms_p99": loop["period_err_ms_p99"],
         "period_err_ms_max": loop["period_err_ms_max"],
+        "platform": platform,
         "planner_restarts": loop["planner_restarts"],
         "questions_asked": sum(d["questions"] for d in run.daemon.tasks_done),  # in finished tasks
         "tasks_done": loop["tasks_done"],
@@ -116,6 +150,19 @@ def _pct(x: float | None) -> str:
     return "n/a" if x is None else f"{x:+.2f} %"
 
 
+def _platform(p: dict[str, Any]) -> str:
+    if "late" not in p:
+        return f"not measured: {p.get('unavailable', 'no probe')}"
+    worst = " / ".join(f"{m:.1f}" for m in p["max_ms"])
+    return f"{p['late_total']} in {sum(p['wakeups'])} wake-ups (worst per CPU {worst} ms)"
+
+
+def _during(p: dict[str, Any]) -> str:
+    if "overruns_during_stall" not in p:
+        return ""
+    return f", {p['overruns_during_stall']} during a machine stall"
+
+
 def format_soak(f: dict[str, Any]) -> str:
     """The figures as a table, then one PASS/FAIL line per criterion."""
     d, w = f["daemon_rss"], f["worker_rss"]
@@ -126,8 +173,10 @@ def format_soak(f: dict[str, Any]) -> str:
         ("daemon RSS growth / slope", f"{_pct(d['growth_pct'])} / {slope}"),
         ("worker RSS start -> end", f"{_mb(w['start_mb'])} -> {_mb(w['end_mb'])}"),
         ("worker RSS growth / slope", f"{_pct(w['growth_pct'])} / {wslope}"),
-        ("overruns (> 1.5 T)", f"{f['overruns']} of {f['control_ticks']} ({f['overrun_pct']:.3f} %)"),
+        ("overruns (> 1.5 T)", f"{f['overruns']} of {f['control_ticks']} ({f['overrun_pct']:.3f} %)"
+         + _during(f.get("platform") or {})),
         ("period error p99 / max", f"{f['period_err_ms_p99']:.3f} / {f['period_err_ms_max']:.3f} ms"),
+        ("machine stalls > T/2 (probe, all CPUs)", _platform(f.get("platform") or {})),
         ("planner restarts", str(f["planner_restarts"])),
         ("questions asked", str(f["questions_asked"])),
         ("tasks done / succeeded", f"{f['tasks_done']} / {f['tasks_succeeded']}"),

@@ -53,7 +53,7 @@ from ..speech.speaker import Speaker, Spoken, question_text
 from . import messages
 from .console import Console
 from .rate import FixedRate, Ring
-from .realtime import make_realtime
+from .realtime import make_realtime, set_switch_interval
 from .siminput import SimInput
 
 log = logging.getLogger("sa_daemon")
@@ -447,9 +447,10 @@ class Daemon:
         if self.opts.exit_when_done and self.opts.duration_s is None and len(self.tasks_done) >= len(sim.tasks):
             self.request_stop("all tasks done")
             return
-        if self.arm is not None:
-            self.arm.close()
-        self.arm = self._arm_factory()
+        if self.arm is None or not self.arm.reset():  # a rebuild only for an arm that cannot reset
+            if self.arm is not None:
+                self.arm.close()
+            self.arm = self._arm_factory()
         assert self.safety is not None
         self.safety.kinematics = self.arm.kinematics
         self.safety.resume()
@@ -561,6 +562,9 @@ class Daemon:
         self._stop_event = asyncio.Event()
         opts = self.opts
         tasks: list[asyncio.Task] = []
+        # Before any helper thread starts: the speech engine's start-up imports alone hold the lock for
+        # 5 ms at a time under the default interval.
+        switch_interval = set_switch_interval(self.cfg.runtime.gil_switch_interval_s)
         try:
             self._start_components()
             for sig in (signal.SIGTERM, signal.SIGINT):
@@ -606,6 +610,7 @@ class Daemon:
                 self.event("shutdown", reason=f"duration {timeout} s reached")
         finally:
             await self._shutdown(tasks)
+            set_switch_interval(switch_interval)
         return self._exit_code
 
     def _start_components(self) -> None:

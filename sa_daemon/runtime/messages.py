@@ -7,6 +7,7 @@ Pure reads of a :class:`~.daemon.Daemon`; the daemon decides when each is sent.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +55,7 @@ def control_dict(d: Daemon) -> dict[str, Any]:
         "overruns": st.overruns if st is not None else 0,
         "skipped": st.skipped if st is not None else 0,
         "realtime_priority": 0 if d.realtime_refused is not None else d.cfg.runtime.realtime_priority,
+        "switch_interval_s": sys.getswitchinterval(),
     }
 
 

@@ -55,6 +55,10 @@ class Ring:
         return min(self._n, self._buf.size)
 
 
+#: Overrun times a :class:`PeriodStats` keeps (the latest; older ones are only counted).
+OVERRUN_TIMES_KEPT = 100
+
+
 @dataclass
 class PeriodStats:
     """Tick-to-tick periods of one loop (the last ``keep`` in a :class:`Ring`, for percentiles)."""
@@ -65,14 +69,21 @@ class PeriodStats:
     ticks: int = 0
     overruns: int = 0  # periods longer than 1.5 x nominal
     skipped: int = 0  # whole ticks missed because a tick ran late
+    #: When the last overruns ended (``time.monotonic`` s, at most :data:`OVERRUN_TIMES_KEPT`), to set
+    #: them beside other logs: the machine's own latency, a fault, a question.
+    overrun_at: Ring = field(init=False)
 
     def __post_init__(self) -> None:
         self.periods_s = Ring(self.keep)
+        self.overrun_at = Ring(OVERRUN_TIMES_KEPT)
 
-    def add(self, period_s: float) -> None:
+    def add(self, period_s: float, at: float | None = None) -> None:
+        """Count one period (s) that ended at ``at`` (``time.monotonic`` s, when known)."""
         self.ticks += 1
         if period_s > 1.5 * self.nominal_s:
             self.overruns += 1
+            if at is not None:
+                self.overrun_at.append(at)
         self.periods_s.append(period_s)
 
     def summary(self) -> dict[str, float]:
@@ -140,6 +151,6 @@ class FixedRate:
             pass
         now = time.monotonic()
         if self._last is not None:
-            self.stats.add(now - self._last)
+            self.stats.add(now - self._last, now)
         self._last = now
         return now

@@ -252,4 +252,6 @@ def add_bench_parsers(bsub: Any) -> None:
     bs.add_argument("--max-growth-pct", type=float, default=5.0,
                     help="RSS growth after warm-up allowed for the daemon and the worker, %% (default 5)")
     bs.add_argument("--max-overruns", type=int, default=0, help="control overruns allowed (default 0)")
+    bs.add_argument("--no-platform-probe", dest="platform_probe", action="store_false",
+                    help="do not run cyclictest beside the daemon (default: run it when installed)")
     bs.set_defaults(func=cmd_bench_soak)
