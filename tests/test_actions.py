@@ -73,9 +73,9 @@ def test_move_twist_is_zero_at_the_goal():
 # -- HO -------------------------------------------------------------------------------------------------
 
 
-def gradients(goal_positions, goal_quats, position=P0, quat=Q0, user=np.zeros(6)):
+def gradients(goal_positions, goal_quats, position=P0, quat=Q0, user=None):
     return goal_gradients(
-        np.asarray(position), np.asarray(quat), np.asarray(user),
+        np.asarray(position), np.asarray(quat), np.zeros(6) if user is None else np.asarray(user),
         np.asarray(goal_positions, dtype=float), np.asarray(goal_quats, dtype=float), INTENT, HO,
     )
 

@@ -22,7 +22,8 @@ def _cmd(*args: str) -> list[str]:
 
 
 def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT_S, env=os.environ.copy())
+    return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT_S, env=os.environ.copy(),
+                          check=False)
 
 
 # -- eval ----------------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import shutil
 import signal
 import subprocess
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -252,7 +253,7 @@ def test_stop_latches_zero_commands_until_resume(policy):
 
 def _max_gap(states: list[dict]) -> float:
     ts = [s["t"] for s in states]
-    return max((b - a for a, b in zip(ts, ts[1:])), default=0.0)
+    return max((b - a for a, b in pairwise(ts)), default=0.0)
 
 
 def test_killed_planner_worker_is_replaced_within_2_s(policy):
@@ -306,7 +307,8 @@ def test_stopped_planner_worker_is_detected_as_hung_and_replaced(policy):
 
 
 def test_answer_without_a_pending_question_exits_1(ho):
-    r = subprocess.run([*CLI, "answer", "yes", "--cmd", ho.cmd], capture_output=True, text=True, timeout=60)
+    r = subprocess.run([*CLI, "answer", "yes", "--cmd", ho.cmd], capture_output=True, text=True, timeout=60,
+                       check=False)
     assert r.returncode == 1, r.stderr
     reply = json.loads(r.stdout)
     assert reply == {"ok": False, "error": "no question is pending"}
@@ -314,13 +316,14 @@ def test_answer_without_a_pending_question_exits_1(ho):
 
 def test_answer_without_a_daemon_times_out_with_exit_2(tmp_path):
     r = subprocess.run([*CLI, "answer", "no", "--cmd", f"tcp://127.0.0.1:{free_port()}", "--timeout", "0.5"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 2 and "no reply" in r.stderr
 
 
 def test_monitor_once_prints_belief_bars_and_the_action(ho):
     ho.collector.state(lambda s: s["planner"]["status"] == "idle" and s["action"]["kind"] == "ho", timeout_s=30)
-    r = subprocess.run([*CLI, "monitor", "--once", "--pub", ho.pub], capture_output=True, text=True, timeout=60)
+    r = subprocess.run([*CLI, "monitor", "--once", "--pub", ho.pub], capture_output=True, text=True, timeout=60,
+                       check=False)
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "method=ho" in out and "belief:" in out
@@ -364,7 +367,7 @@ def test_sigterm_stops_cleanly_and_leaves_a_plottable_recording(tmp_path):
     png = tmp_path / "plot" / "timeline.png"
     png.parent.mkdir()
     r = subprocess.run([*CLI, "plot", str(tmp_path / "d" / "run.mcap"), "--out", str(png)],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=120, check=False)
     assert r.returncode == 0, r.stderr
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     assert f"{len(states)} states" in r.stdout
@@ -412,7 +415,7 @@ def _bad_config(tmp_path: Path) -> Path:
 
 def test_bad_config_file_exits_2_naming_the_key(tmp_path):
     r = subprocess.run([*CLI, "--config", str(_bad_config(tmp_path)), *_run_args(tmp_path)],
-                       capture_output=True, text=True, timeout=60, cwd=tmp_path)
+                       capture_output=True, text=True, timeout=60, cwd=tmp_path, check=False)
     assert r.returncode == 2
     assert "runtime.publish_hzz" in r.stderr and "unknown key" in r.stderr
 
@@ -420,14 +423,14 @@ def test_bad_config_file_exits_2_naming_the_key(tmp_path):
 def test_bad_config_file_after_the_verb_exits_2_naming_the_key(tmp_path):
     args = _run_args(tmp_path)
     r = subprocess.run([*CLI, args[0], "--config", str(_bad_config(tmp_path)), *args[1:]],
-                       capture_output=True, text=True, timeout=60, cwd=tmp_path)
+                       capture_output=True, text=True, timeout=60, cwd=tmp_path, check=False)
     assert r.returncode == 2
     assert "runtime.publish_hzz" in r.stderr
 
 
 def test_unknown_task_exits_2_naming_it(tmp_path):
     r = subprocess.run([*CLI, *_run_args(tmp_path), "--scene", "scene1", "--task", "cup:sideways"],
-                       capture_output=True, text=True, timeout=120, cwd=tmp_path)
+                       capture_output=True, text=True, timeout=120, cwd=tmp_path, check=False)
     assert r.returncode == 2, r.stderr
     assert "cup:sideways" in r.stderr
     assert "Traceback" not in r.stderr

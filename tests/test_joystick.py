@@ -330,7 +330,7 @@ async def test_evdev_joystick_reports_axes_zeroes_on_unplug_and_reconnects(bus):
         bus.plugged["/dev/input/event9"] = FakeDevice("/dev/input/event9", "Fake Stick", JOY_CAPS, None)
         await _until(lambda: any(c[0] == "link" and c[1] is True for c in calls[n:]))
         assert joy.connected and joy.device_name == "Fake Stick"
-        assert "/dev/input/event9" in [c for c in calls[n:] if c[0] == "link"][0][2]
+        assert "/dev/input/event9" in next(c for c in calls[n:] if c[0] == "link")[2]
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)

@@ -22,22 +22,22 @@ DT = 0.025
 
 
 def _cfg(**kw) -> SimUserConfig:
-    base = dict(
-        linear_gain=5.0,
-        angular_gain=5.0,
-        reaction_delay_s=0.0,
-        noise_std=0.0,
-        mode_switch_s=0.0,
-        answer_delay_s=0.0,
-        answer_error_rate=0.0,
-        pregrasp_standoff_m=STANDOFF,
-        pregrasp_tolerance_m=0.02,
-        rotation_done_rad=math.pi / 96,
-        close_translation_m=0.01,
-        close_rotation_rad=math.pi / 48,
-        timeout_s=100.0,
-        max_deflection=1.0,
-    )
+    base = {
+        "linear_gain": 5.0,
+        "angular_gain": 5.0,
+        "reaction_delay_s": 0.0,
+        "noise_std": 0.0,
+        "mode_switch_s": 0.0,
+        "answer_delay_s": 0.0,
+        "answer_error_rate": 0.0,
+        "pregrasp_standoff_m": STANDOFF,
+        "pregrasp_tolerance_m": 0.02,
+        "rotation_done_rad": math.pi / 96,
+        "close_translation_m": 0.01,
+        "close_rotation_rad": math.pi / 48,
+        "timeout_s": 100.0,
+        "max_deflection": 1.0,
+    }
     if "persist_window_s" in SimUserConfig.model_fields:
         # No "stalled: push harder" escalation unless a test asks for it: it would hide the plain
         # proportional command these tests check.

@@ -47,6 +47,10 @@ class Stall:
     def overlaps(self, start: float, stop: float) -> bool:
         return self.end - self.late_s <= stop and self.end >= start
 
+    def as_row(self) -> list[float]:
+        """``[cpu, end (s), late (ms)]``, for JSON."""
+        return [self.cpu, round(self.end, 4), round(self.late_s * 1e3, 2)]
+
 
 @dataclass(frozen=True)
 class PlatformLatency:
@@ -74,7 +78,7 @@ class PlatformLatency:
         return {"probe": "pinned SCHED_FIFO sleeper per CPU, 1 ms grid", "threshold_ms": self.threshold_ms,
                 "cpus": self.cpus, "wakeups": self.wakeups, "max_ms": self.max_ms, "late": self.late,
                 "late_total": self.late_total,
-                "stalls": [[s.cpu, round(s.end, 4), round(s.late_s * 1e3, 2)] for s in self.stalls]}
+                "stalls": [s.as_row() for s in self.stalls]}
 
 
 class PlatformProbe:

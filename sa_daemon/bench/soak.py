@@ -102,8 +102,7 @@ def run_soak(args: argparse.Namespace) -> dict[str, Any]:
     if latency is not None:
         matched = [latency.during_stall(t, half_period) for t in overruns_at]
         platform["overruns_during_stall"] = sum(m is not None for m in matched)
-        platform["overrun_stalls"] = [None if m is None else [m.cpu, round(m.end, 4), round(m.late_s * 1e3, 2)]
-                                      for m in matched]
+        platform["overrun_stalls"] = [None if m is None else m.as_row() for m in matched]
     daemon_rss, worker_rss = memory_figures(run.rss, warm)
     criteria = [
         _criterion("daemon RSS growth %", daemon_rss["growth_pct"], args.max_growth_pct),

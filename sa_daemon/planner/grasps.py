@@ -106,9 +106,9 @@ def cluster_grasps(
     out: dict[GraspType, list[Pose]] = {t: [] for t in types}
     for pose in poses:
         found = (classify_grasp(pose, fine=False), classify_grasp(pose, fine=True))
-        for t in out:
+        for t, kept in out.items():
             if t in found:
-                out[t].append(pose)
+                kept.append(pose)
     return out
 
 

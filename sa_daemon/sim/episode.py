@@ -117,7 +117,7 @@ def run_trial(
     dt = 1.0 / cfg.eval.control_hz
     user = SimulatedUser(task, desired_pose(goal, scene.start, cfg, rng, pose_choice), cfg.sim_user, cfg.input, rng, dt)
     belief = model.initial_belief(scene.goals)
-    plan_every = max(1, int(round(cfg.planner.period_s / dt)))
+    plan_every = max(1, round(cfg.planner.period_s / dt))
     asked: set[str] = set()
     action: Action = NO_ASSIST
     plan_goals = belief.goals
@@ -142,10 +142,9 @@ def run_trial(
             break
         u = inp.twist(cfg.input)
         belief = model.update_input(belief, pose, u)
-        if question is not None:
-            if t >= answer_at:
-                belief = model.update_answer(belief, question, user.answer(question))
-                question = None  # the action is still the question: re-plan now
+        if question is not None and t >= answer_at:
+            belief = model.update_answer(belief, question, user.answer(question))
+            question = None  # the action is still the question: re-plan now
         if question is None and (step % plan_every == 0 or action.kind is ActionKind.QUESTION):
             snap = Snapshot(
                 belief.goals, belief.probs, pose, u, inp.mode, frozenset(asked), method,

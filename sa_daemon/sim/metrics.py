@@ -7,6 +7,7 @@ and whether the robot's twist opposed the user's (section III-E rule) at that sa
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import numpy as np
 
@@ -27,7 +28,7 @@ def opposing_pct(opposed: Sequence[bool]) -> float:
 
 def mode_changes(modes: Sequence[str]) -> int:
     """Number of switches between translation and rotation mode."""
-    return int(sum(a != b for a, b in zip(modes, modes[1:])))
+    return int(sum(a != b for a, b in pairwise(modes)))
 
 
 def correct_prediction(final_target_p: float, threshold: float = PREDICTION_THRESHOLD) -> bool:

@@ -72,9 +72,9 @@ class SimulatedUser:
         self._switch_left = 0.0
         self._blocked_s = 0.0  # how long the arm has refused the user's motion (s)
         self._detour = False  # aligning early because the approach was blocked
-        self._seen: deque[Pose] = deque(maxlen=int(round(cfg.reaction_delay_s / dt)) + 1)
+        self._seen: deque[Pose] = deque(maxlen=round(cfg.reaction_delay_s / dt) + 1)
         # (error, commanded motion this step) over the persistence window.
-        self._errors_seen: deque[tuple[float, float]] = deque(maxlen=max(2, int(round(cfg.persist_window_s / dt))))
+        self._errors_seen: deque[tuple[float, float]] = deque(maxlen=max(2, round(cfg.persist_window_s / dt)))
         approach = desired.rotation[:, 2]
         self.pregrasp = desired.position - cfg.pregrasp_standoff_m * approach
 
