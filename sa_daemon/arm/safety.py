@@ -14,7 +14,8 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
    ``slow`` and the command moves toward the singularity, its component along the weakest direction
    ``u`` is scaled by ``1 - (k - slow) / (stop - slow)``, and removed at ``stop``; the rest of the
    command passes (MoveIt Servo scales the whole command, which also held the motion that would have
-   carried the xArm's wrist across joint 5 = 0, and trapped users there: ``docs/arm.md``). The Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first:
+   carried the xArm's wrist across joint 5 = 0, and trapped users there: ``docs/arm.md``). The
+   Jacobian's linear rows (m/rad) are divided by ``characteristic_length_m`` first:
    the condition number of a mixed-unit Jacobian depends on the unit of length, and at the xArm-6's
    0.3 m links this makes a well-conditioned pose read about 15. "Toward" is MoveIt Servo's test: the
    weakest output direction ``u`` of the Jacobian (its smallest singular value), signed so that a
@@ -199,15 +200,19 @@ class SafetyPipeline:
         along the weakest output direction, signed positive toward the singularity (stage 8)."""
         jac = self._normalised_jacobian(q)
         kappa, u = self._weakest(jac)
-        u = self._signed_toward(jac, q, kappa, u)
-        tn = self._normalised_twist(twist)
+        _, tn, along = self._along_toward(jac, q, kappa, u, twist)
         norm = float(np.linalg.norm(tn))
-        return kappa, (float(u @ tn) / norm if norm > 0 else 0.0)
+        return kappa, (along / norm if norm > 0 else 0.0)
 
-    def _normalised_twist(self, twist: FloatArray) -> FloatArray:
+    def _along_toward(
+        self, jac: FloatArray, q: FloatArray, kappa: float, u: FloatArray, twist: FloatArray
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """``(u, tn, along)``: the weakest direction ``u`` signed toward the singularity, ``twist`` with
+        its linear part divided by ``characteristic_length_m``, and the component of that along ``u``."""
+        u = self._signed_toward(jac, q, kappa, u)
         tn = np.array(twist, dtype=float)
         tn[:3] /= self.cfg.characteristic_length_m
-        return tn
+        return u, tn, float(u @ tn)
 
     @staticmethod
     def _weakest(jac: FloatArray) -> tuple[float, FloatArray]:
@@ -232,9 +237,7 @@ class SafetyPipeline:
         jac = self._normalised_jacobian(q)  # once per tick, and one SVD gives k and the weak direction
         kappa, u = self._weakest(jac)
         if kappa > c.singularity_slow:
-            u = self._signed_toward(jac, q, kappa, u)
-            tn = self._normalised_twist(t)
-            along = float(u @ tn)
+            u, tn, along = self._along_toward(jac, q, kappa, u, t)
             if along > c.singularity_share * float(np.linalg.norm(tn)):  # moving toward the singularity
                 halt = kappa >= c.singularity_stop
                 codes.append(SafetyCode.SINGULARITY_HALT if halt else SafetyCode.SINGULARITY_SLOW)
