@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .config import METHODS, ConfigError, load_config
+from .extras import MissingExtra
 from .planner.goals import parse_target
 from .planner.scene import SceneError, builtin_scene_names, load_scene
 from .runtime import verbs
@@ -69,6 +70,40 @@ def cmd_bench_planner(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_voice(args: argparse.Namespace) -> int:
+    from .bench.voice import format_table, run_voice_bench, write_json
+    from .extras import require
+
+    require("pocketsphinx", "voice")
+    cfg = load_config(args.config)
+    threshold = cfg.voice.min_confidence if args.min_confidence is None else args.min_confidence
+    r = run_voice_bench(threshold, jobs=args.jobs)
+    print(format_table(r))
+    if args.json:
+        write_json(r, args.json)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_hear(args: argparse.Namespace) -> int:
+    """One word (yes, no or none) for a WAV file, with the confidence: the recogniser on your voice."""
+    from .extras import require
+
+    require("pocketsphinx", "voice")
+    from .speech.audio import answer_in, wav_to_16k
+    from .speech.recogniser import YesNoRecogniser
+
+    cfg = load_config(args.config)
+    threshold = cfg.voice.min_confidence if args.min_confidence is None else args.min_confidence
+    word, conf, heard = answer_in(wav_to_16k(args.wav), YesNoRecogniser(), threshold, cfg.voice.max_segment_s)
+    print(f"{word} {conf:.2f}")
+    if args.verbose:
+        for h in heard:
+            print(f"  utterance {h.seconds:.2f} s: answer {h.answer}, confidence {h.confidence:.2f}, "
+                  f"grammar '{h.words}', check '{h.check}', {h.decode_s * 1e3:.0f} ms", file=sys.stderr)
+    return 0
+
+
 def cmd_scenes(args: argparse.Namespace) -> int:
     for name in builtin_scene_names():
         s = load_scene(name)
@@ -105,7 +140,18 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--budget", type=float, default=0.1, help="anytime budget (s)")
     bp.add_argument("--no-peer", action="store_true", help="skip the pomdp_py comparison")
     bp.set_defaults(func=cmd_bench_planner)
+    bv = bsub.add_parser("voice", help="yes/no recognition and false-accept rates on espeak-ng speech")
+    bv.add_argument("--json", help="write the figures and every utterance's result to this file")
+    bv.add_argument("--min-confidence", type=float, help="default: voice.min_confidence")
+    bv.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    bv.set_defaults(func=cmd_bench_voice)
     verbs.add_bench_parsers(bsub)
+
+    h = sub.add_parser("hear", help="recognise yes/no in a WAV file: prints yes, no or none and the confidence")
+    h.add_argument("wav", help="16-bit PCM WAV, any rate")
+    h.add_argument("--min-confidence", type=float, help="default: voice.min_confidence")
+    h.add_argument("-v", "--verbose", action="store_true", help="every utterance found, on stderr")
+    h.set_defaults(func=cmd_hear)
 
     s = sub.add_parser("scenes", help="list the built-in scenes and their goals")
     s.set_defaults(func=cmd_scenes)
@@ -129,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, SceneError, KeyError, ValueError, OSError, TimeoutError) as e:
+    except (ConfigError, SceneError, KeyError, ValueError, OSError, TimeoutError, MissingExtra) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
         print(f"sa-daemon: error: {msg}", file=sys.stderr)
         return 2

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -273,6 +273,38 @@ class SpeechConfig(_Section):
     volume: float = Field(1.0, ge=0, le=1)
     wav_dir: str = Field("", description="also write each utterance to a WAV file here (empty: no files)")
     play: bool = Field(True, description="play through the sound card (off: WAV files only)")
+    library: Literal["auto", "system", "wheel"] = Field(
+        "auto", description="espeak-ng library: the system's (libespeak-ng1) when present, else the pip wheel's"
+    )
+
+
+class VoiceConfig(_Section):
+    """Answers by voice (``docs/daemon.md``): offline yes/no recognition while a question is pending.
+
+    Needs the ``voice`` extra (pocketsphinx). Audio comes from ``source``: ``alsa`` (``arecord`` on
+    ``device``), ``pcm:PATH`` (raw 16-bit mono little-endian PCM at 16 kHz, e.g. a FIFO) or ``wav:PATH``.
+    """
+
+    enabled: bool = Field(False, description="listen for spoken yes/no answers to questions")
+    source: str = Field("alsa", min_length=1, description="alsa | pcm:PATH | wav:PATH")
+    device: str = Field("default", min_length=1, description="ALSA capture device for source alsa (arecord -D)")
+    min_confidence: float = Field(
+        0.7, ge=0, le=1, description="a recognised yes/no below this confidence is ignored (docs/daemon.md)"
+    )
+    listen_s: float = Field(8.0, gt=0, le=120, description="listen this long after the question was spoken (s)")
+    after_speech_s: float = Field(
+        0.3, ge=0, le=5, description="start listening this long after the robot stops speaking (its echo) (s)"
+    )
+    echo: bool = Field(True, description='say what was heard ("Yes: the cup, top grasp")')
+    max_segment_s: float = Field(4.0, gt=0.5, le=30, description="longer speech is not an answer and is ignored (s)")
+
+    @field_validator("source")
+    @classmethod
+    def _source(cls, v: str) -> str:
+        kind, sep, path = v.partition(":")
+        if v == "alsa" or (sep and kind in ("pcm", "wav") and path):
+            return v
+        raise ValueError(f"must be alsa, pcm:PATH or wav:PATH, not {v!r}")
 
 
 class ZmqConfig(_Section):
@@ -370,6 +402,7 @@ class Config(_Section):
     arm: ArmConfig = ArmConfig()
     joystick: JoystickConfig = JoystickConfig()
     speech: SpeechConfig = SpeechConfig()
+    voice: VoiceConfig = VoiceConfig()
     zmq: ZmqConfig = ZmqConfig()
     record: RecordConfig = RecordConfig()
 

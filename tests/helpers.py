@@ -68,6 +68,27 @@ def wav_stats(path: str | Path) -> tuple[int, int, int, float, float]:
     return ch, width, rate, n / rate if rate else 0.0, rms
 
 
+SYNTH = """
+import json, sys
+from sa_daemon.speech import espeak
+engine = espeak.pyttsx3_engine(sys.argv[1])
+for path, text, voice, rate in json.loads(sys.stdin.read()):
+    espeak.synthesise(engine, text, path, voice, rate)
+print(json.dumps(espeak.loaded().as_dict()))
+"""
+
+
+def synth_wavs(folder: Path, items: dict[str, tuple[str, str, int]], library: str = "auto") -> dict:
+    """Speak each ``name: (text, voice, rate)`` with espeak-ng into ``folder/name.wav``, in a child process
+    (pyttsx3 keeps one engine per process and thread); returns the library it used (``EspeakLibrary``'s dict)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    jobs = [(str(folder / f"{name}.wav"), *spec) for name, spec in items.items()]
+    r = subprocess.run([sys.executable, "-c", SYNTH, library], input=json.dumps(jobs), capture_output=True,
+                       text=True, timeout=120, check=False)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
 @contextlib.contextmanager
 def small_disk(path: Path, size: str = "1m") -> Iterator[Path]:
     """A real, small filesystem (tmpfs of ``size``) mounted on ``path``: its writes fail with ``ENOSPC``

@@ -701,7 +701,7 @@ def test_no_speech_engine_questions_are_still_published_and_answerable(tmp_path)
         _, un = c.event("speech_unavailable", timeout_s=10)
         assert un["error"] == "speech unavailable: RuntimeError: injected: no speech driver"
         q, a = ask_and_answer(d, i0)
-        assert q["spoken"] is False and q["text"].endswith("your goal?")
+        assert q["spoken"] == "unavailable" and q["text"].endswith("your goal?")
         _, s = c.state(lambda s: s["t"] > a["t"] + 2.0, timeout_s=10)
         assert d.stop() == 0
     finally:
@@ -710,7 +710,7 @@ def test_no_speech_engine_questions_are_still_published_and_answerable(tmp_path)
     assert not (tmp_path / "d" / "wav").exists() or not list((tmp_path / "d" / "wav").iterdir())
     loops = loops_unaffected(d, 0, ready["t"], s["t"], tmp_path / "d" / "sp.mcap")
     figure("speech_missing", f"speech_unavailable at start; question at t={q['t']:.1f} s published "
-           f"(spoken false), answered by command {a['after_s'] * 1e3:.0f} ms later; {loops}")
+           f"(spoken 'unavailable'), answered by command {a['after_s'] * 1e3:.0f} ms later; {loops}")
 
 
 def test_speech_engine_failing_then_hanging_leaves_questions_answerable(tmp_path):
@@ -721,9 +721,10 @@ def test_speech_engine_failing_then_hanging_leaves_questions_answerable(tmp_path
         c = d.collector
         d.fault("speech_fail")
         q1, _ = ask_and_answer(d, 0)
-        assert q1["spoken"] is True  # queued: the engine fails while speaking it
+        assert q1["spoken"] == "written"  # queued (play = false): the engine fails while speaking it
         _, sp = c.event("spoken", timeout_s=30, text=q1["text"])
         assert sp["error"] == "RuntimeError: injected: the speech driver failed" and sp["played"] is False
+        assert sp["outcome"] == "failed"
         assert sp["wav"] is None
         i_hang = len(c)
         t_hang = d.fault("speech_hang")["t"]
@@ -773,8 +774,10 @@ def test_sound_player_failing_then_hanging_leaves_questions_answerable_and_nothi
         d.wait_ready()
         c = d.collector
         q1, _ = ask_and_answer(d, 0)
+        assert q1["spoken"] == "played"  # a player is installed (the fake): the question is for playing
         _, sp = c.event("spoken", timeout_s=60, text=q1["text"])
         assert sp["played"] is False and sp["error"] == "aplay: aplay: main:831: audio open error: No such file or directory"
+        assert sp["outcome"] == "written"
         assert sp["wav"] and (tmp_path / "d" / sp["wav"]).stat().st_size > 1000  # synthesised all the same
         mode.write_text("hang")
         i_hang = len(c)

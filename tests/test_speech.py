@@ -1,19 +1,36 @@
-"""Spoken questions: question text, real pyttsx3 + espeak-ng synthesis to WAV, and a speaker that never
+"""Spoken questions: question text, real pyttsx3 + espeak-ng synthesis to WAV (from the system library or
+the pip wheel's), what happens to each question (played / written / unavailable), and a speaker that never
 blocks its caller (no engine, a failing engine, a hung engine)."""
 
 from __future__ import annotations
 
-import shutil
+import ctypes
+import os
+import subprocess
+import sys
 import threading
 import time
 import wave
 from pathlib import Path
 
 import pytest
-from helpers import wav_stats
+from helpers import synth_wavs, wav_stats
 
 from sa_daemon.config import SpeechConfig
-from sa_daemon.speech.speaker import Speaker, Spoken, question_text
+from sa_daemon.speech.speaker import Speaker, Spoken, echo_text, question_text
+
+
+def _system_espeak() -> bool:
+    """Whether the dynamic loader finds a system libespeak-ng (checked apart from the code under test)."""
+    try:
+        ctypes.CDLL("libespeak-ng.so.1")
+    except OSError:
+        return False
+    return True
+
+
+needs_system_espeak = pytest.mark.skipif(
+    not _system_espeak(), reason="no system espeak-ng library here (apt-get install libespeak-ng1)")
 
 
 @pytest.mark.parametrize(
@@ -30,7 +47,47 @@ def test_question_text(target, text):
     assert question_text(target) == text
 
 
-@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng is not installed (apt-get install espeak-ng)")
+@pytest.mark.parametrize("yes, target, text", [
+    (True, "cup:top", "Yes: the cup, top grasp"),
+    (False, "meat can:side_horizontal", "No: the meat can, side horizontal grasp"),
+    (True, "spoon", "Yes: the spoon"),
+])
+def test_echo_text(yes, target, text):
+    assert echo_text(yes, target) == text
+
+
+@pytest.mark.parametrize("library", ["wheel", pytest.param("system", marks=needs_system_espeak)])
+def test_each_library_speaks_a_non_silent_wav(tmp_path, library):
+    """The wheel's library needs no system package; the system's is used when asked (and by auto)."""
+    lib = synth_wavs(tmp_path, {"q": ("Is the cup with top grasp your goal?", "en-us", 150)}, library)
+    assert lib["source"] == library
+    assert lib["version"].startswith("1.")
+    if library == "wheel":
+        assert "espeakng_loader" in lib["path"] and lib["data_path"].endswith("espeak-ng-data")
+    ch, width, rate, duration, rms = wav_stats(tmp_path / "q.wav")
+    assert (ch, width, rate) == (1, 2, 22050)
+    assert 1.0 < duration < 5.0 and rms > 500.0
+
+
+def test_auto_takes_the_system_library_when_there_is_one_else_the_wheel(tmp_path):
+    lib = synth_wavs(tmp_path, {"q": ("yes", "en", 150)}, "auto")
+    assert lib["source"] == ("system" if _system_espeak() else "wheel")
+
+
+def test_without_any_library_speech_is_unavailable_with_the_reason(tmp_path):
+    """The wheel missing and no system library: one clear error, no crash (a child process whose import
+    of espeakng_loader fails and whose loader path finds no libespeak-ng)."""
+    code = (
+        "import sys; sys.modules['espeakng_loader'] = None\n"
+        "from sa_daemon.speech import espeak\n"
+        "try:\n espeak.load('wheel')\nexcept espeak.SpeechUnavailable as e:\n print('unavailable:', e)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("unavailable: no espeak-ng library (wheel: the espeakng-loader wheel is not installed")
+    assert "pip install espeakng-loader" in r.stdout
+
+
 def test_real_utterance_becomes_a_non_silent_16_bit_mono_wav(tmp_path):
     done: list[Spoken] = []
     got = threading.Event()
@@ -49,7 +106,7 @@ def test_real_utterance_becomes_a_non_silent_16_bit_mono_wav(tmp_path):
     finally:
         sp.close(timeout_s=10.0)
     s = done[0]
-    assert s.text == text and s.error is None and s.played is False
+    assert s.text == text and s.error is None and s.played is False and s.outcome == "written"
     assert s.wav is not None and Path(s.wav).parent == tmp_path / "wav"
     assert "chips-can-with-side-grasp" in Path(s.wav).name and s.wav.endswith(".wav")
     ch, width, rate, duration, rms = wav_stats(s.wav)
@@ -161,3 +218,75 @@ def test_a_hung_engine_never_blocks_say_and_drops_when_the_queue_is_full():
     sp._thread.join(10.0)
     assert not sp._thread.is_alive()
     assert eng.calls == 1
+
+
+FAKE_APLAY = """#!/bin/sh
+# aplay's documented call here: aplay -q FILE.wav; this one checks the file is a WAV and records it.
+[ "$1" = "-q" ] || { echo "aplay: unexpected arguments $*" >&2; exit 2; }
+head -c 4 "$2" | grep -q RIFF || { echo "aplay: $2: not a WAV" >&2; exit 1; }
+echo "$2" >> "$APLAY_LOG"
+"""
+
+
+def _speak_once(cfg: SpeechConfig) -> tuple[Speaker, Spoken]:
+    done: list[Spoken] = []
+    got = threading.Event()
+    sp = Speaker(cfg, on_done=lambda s: (done.append(s), got.set()))
+    assert sp.wait_ready(20.0), sp.error
+    assert sp.say("Is the bowl with top grasp your goal?")
+    assert got.wait(60.0)
+    return sp, done[0]
+
+
+def test_with_a_player_questions_are_played(tmp_path, monkeypatch):
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "aplay").write_text(FAKE_APLAY)
+    (bin_dir / "aplay").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("APLAY_LOG", str(tmp_path / "played.txt"))
+    sp, s = _speak_once(SpeechConfig(play=True))
+    try:
+        assert sp.mode == "played" and sp.player_missing is None
+        assert sp.status()["player"] == str(bin_dir / "aplay")
+        assert s.outcome == "played" and s.played and s.error is None and s.wav is None
+        assert len((tmp_path / "played.txt").read_text().split()) == 1  # the temporary WAV was played
+    finally:
+        sp.close()
+
+
+def test_without_a_player_questions_are_written_and_the_missing_player_is_named(tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))  # no aplay anywhere
+    sp, s = _speak_once(SpeechConfig(play=True, wav_dir=str(tmp_path / "wav")))
+    try:
+        assert sp.mode == "written"
+        assert sp.player_missing == ("aplay not found: questions are written as WAV files, not played "
+                                     "(install the alsa-utils package, e.g. apt-get install alsa-utils)")
+        assert s.outcome == "written" and not s.played and s.error is None
+        assert wav_stats(s.wav)[4] > 500.0
+        st = sp.status()
+        assert st["mode"] == "written" and st["player"] is None and st["library"]["source"] in ("system", "wheel")
+    finally:
+        sp.close()
+
+
+def test_play_off_is_written_and_no_player_is_missing(tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    sp = Speaker(SpeechConfig(play=False))
+    try:
+        assert sp.wait_ready(20.0)
+        assert sp.mode == "written" and sp.player_missing is None
+    finally:
+        sp.close()
+
+
+def test_no_engine_is_the_unavailable_state():
+    def broken():
+        raise RuntimeError("no espeak here")
+
+    sp = Speaker(SpeechConfig(), engine_factory=broken)
+    try:
+        assert sp.wait_ready(5.0) is False
+        assert sp.mode == "unavailable" and sp.status()["error"] == "speech unavailable: RuntimeError: no espeak here"
+    finally:
+        sp.close()

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Config, ConfigError
+from ..extras import MissingExtra, require
 from ..geometry import FloatArray, Pose
 from .base import Arm, ArmState, Kinematics, limit_twist
 
@@ -130,11 +131,10 @@ def _default_api_factory(ip: str) -> Callable[[], Any]:
 
         return lambda: FakeXArmAPI("fake", is_radian=True, do_not_open=True)
     try:
-        from xarm.wrapper import XArmAPI  # type: ignore[import-not-found]
-    except ImportError as e:
-        raise ConfigError('arm.backend "xarm" (--arm xarm) needs the xArm SDK: pip install ".[xarm]" '
-                          "(xarm-python-sdk)") from e
-    return lambda: XArmAPI(ip, is_radian=True, do_not_open=True)
+        sdk = require("xarm.wrapper", "xarm")
+    except MissingExtra as e:  # a ConfigError: the message starts with the key, arm.backend
+        raise ConfigError(str(e)) from e
+    return lambda: sdk.XArmAPI(ip, is_radian=True, do_not_open=True)
 
 
 def _default_kinematics(cfg: Config) -> Kinematics | None:

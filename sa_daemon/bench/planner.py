@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Config
+from ..extras import require
 from ..geometry import Pose
 from ..planner.belief import Belief
 from ..planner.model import SharedAutonomyModel
@@ -69,6 +70,7 @@ def run_planner_bench(
     snaps = sample_snapshots(scene, cfg, samples)
     solve_ms, agree, peer_agree, questions, complete = [], 0, 0, 0, 0
     if peer:
+        require("pomdp_py", "bench")  # one line naming the extra, not a traceback
         from .peer import pouct_plan
     for i, snap in enumerate(snaps):
         full = solver.plan(dataclasses.replace(snap, budget_s=None, node_budget=None))

@@ -21,7 +21,6 @@ tick ~0.2 ms) and is measured by ``sa-daemon bench loop``.
 from __future__ import annotations
 
 import asyncio
-import functools
 import gc
 import logging
 import math
@@ -49,7 +48,7 @@ from ..planner.model import Command, SharedAutonomyModel
 from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
-from ..speech.speaker import Speaker, Spoken, question_text
+from ..speech.speaker import Speaker, Spoken, echo_text, question_text
 from . import messages
 from .console import Console
 from .rate import FixedRate, Ring
@@ -87,6 +86,7 @@ class PendingQuestion:
     target: str
     text: str
     asked_at: float  # time.monotonic() s
+    qid: int = 0  # numbers the questions, so that a late voice answer cannot answer the next one
 
 
 class Daemon:
@@ -141,6 +141,8 @@ class Daemon:
         self.server: ZmqServer | None = None
         self.worker: PlannerWorker | None = None
         self.speaker: Speaker | None = None
+        self.voice: Any = None  # speech.listener.VoiceListener when voice.enabled
+        self._questions_asked = 0
         self.recorder: Recorder | None = None
         self.notifier = Notifier()
         self.safety: SafetyPipeline | None = None
@@ -229,29 +231,79 @@ class Daemon:
 
     def ask(self, target: str) -> None:
         text = question_text(target)
-        self.question = PendingQuestion(target, text, time.monotonic())
+        self._questions_asked += 1
+        self.question = PendingQuestion(target, text, time.monotonic(), self._questions_asked)
         self.asked.add(target)
-        spoken = self.speaker.say(text) if self.speaker is not None else False
+        queued = self.speaker is not None and self.speaker.say(text)
+        spoken = self.speaker.mode if queued else "unavailable"  # type: ignore[union-attr]
         self.event("question", goal=target, text=text, spoken=spoken)
+        if not queued:
+            self._listen(self.question)  # nothing will be said: listen at once
 
-    def answer(self, yes: bool, source: str) -> None:
-        """Apply a yes/no answer to the pending question; :class:`RequestError` if there is none."""
+    def _clear_question(self) -> None:
+        """The pending question is gone (answered, timed out, dropped): stop listening for it."""
+        self.question = None
+        if self.voice is not None:
+            self.voice.mute()
+
+    def answer(self, yes: bool, source: str, **detail: Any) -> None:
+        """Apply a yes/no answer to the pending question; :class:`RequestError` if there is none.
+        ``detail`` (a voice answer's ``confidence``) goes into the ``answer`` event."""
         q = self.question
         if q is None:
             raise RequestError("no question is pending")
         self.belief = self.model.update_answer(self.belief, q.target, yes)
-        self.question = None
+        self._clear_question()
         self.action, self.action_until = NO_ASSIST, 0.0  # re-plan at once
         self.event("answer", goal=q.target, value="yes" if yes else "no", source=source,
-                   after_s=round(time.monotonic() - q.asked_at, 3))
+                   after_s=round(time.monotonic() - q.asked_at, 3), **detail)
 
     def _on_spoken(self, s: Spoken) -> None:
+        """(The speech thread.) An utterance finished."""
         loop = self._loop
         if loop is not None and not loop.is_closed():
-            loop.call_soon_threadsafe(functools.partial(
-                self.event, "spoken", text=s.text, wav=s.wav, played=s.played,
-                seconds=round(s.seconds, 3), error=s.error,
-            ))
+            loop.call_soon_threadsafe(self._spoken, s)
+
+    def _spoken(self, s: Spoken) -> None:
+        self.event("spoken", text=s.text, outcome=s.outcome, wav=s.wav, played=s.played,
+                   seconds=round(s.seconds, 3), error=s.error)
+        q = self.question
+        if q is not None and s.text == q.text and not (self.speaker and self.speaker.speaking):
+            self._listen(q)  # the question has been said: its answer may come now
+
+    # -- answers by voice (speech/listener.py) -----------------------------------------------------------
+
+    def _listen(self, q: PendingQuestion) -> None:
+        if self.voice is None or not self.voice.ready:
+            return
+        vc = self.cfg.voice
+        t_open = time.monotonic() + vc.after_speech_s
+        self.voice.listen(q.qid, t_open, t_open + vc.listen_s)
+        self.event("listening", goal=q.target, for_s=vc.listen_s)
+
+    def _on_heard(self, qid: int, heard: dict[str, Any], t_start: float, t_end: float) -> None:
+        """The voice process recognised an utterance inside a listening window."""
+        q = self.question
+        value = heard.get("answer", "none")
+        if q is None or q.qid != qid:
+            reason = "no question pending"
+        elif value not in ("yes", "no"):
+            reason = heard.get("reason", "not a yes or no")
+        elif heard["confidence"] < self.cfg.voice.min_confidence:
+            reason = f"confidence below voice.min_confidence {self.cfg.voice.min_confidence:g}"
+        else:
+            reason = None
+        self.event("heard", **heard, accepted=reason is None, reason=reason,
+                   latency_s=round(time.monotonic() - t_end, 3))
+        if reason is not None or q is None:
+            return
+        self.answer(value == "yes", source="voice", confidence=heard["confidence"])
+        if self.cfg.voice.echo and self.speaker is not None:
+            self.speaker.say(echo_text(value == "yes", q.target))
+
+    def _on_voice_error(self, text: str) -> None:
+        log.error("voice: %s", text)
+        self.event("voice_unavailable", error=text)
 
     def _on_record_error(self, text: str) -> None:
         """(The recorder's writer thread.) A write failed, e.g. the disk is full: the recording has
@@ -302,7 +354,8 @@ class Daemon:
     def set_method(self, method: str) -> None:
         spec = method_spec(method)  # raises on an unknown name
         self.method = method
-        self.action, self.action_until, self.question = NO_ASSIST, 0.0, None
+        self.action, self.action_until = NO_ASSIST, 0.0
+        self._clear_question()
         if not spec.planned:
             self.planner_status = WorkerStatus.IDLE
         self.event("method", method=method)
@@ -458,7 +511,7 @@ class Daemon:
         self.gripper_closed = False
         self.belief = self.model.initial_belief(self.opts.scene.goals)
         self.asked.clear()
-        self.question = None
+        self._clear_question()
         self.action, self.action_until = NO_ASSIST, 0.0
         task = sim.next_task(self.arm_state.pose, self.now())
         self.set_mode(Mode.TRANSLATION)
@@ -476,7 +529,7 @@ class Daemon:
     def _question_timeout(self, mono: float) -> None:
         q = self.question
         if q is not None and mono - q.asked_at > self.cfg.runtime.question_timeout_s:
-            self.question = None
+            self._clear_question()
             self.action, self.action_until = NO_ASSIST, 0.0
             self.event("question_timeout", goal=q.target)
 
@@ -649,6 +702,11 @@ class Daemon:
                 raise OSError(f"record.path (--record) {path}: cannot write: {e.strerror or e}") from None
         if cfg.speech.enabled:
             self.speaker = Speaker(cfg.speech, on_done=self._on_spoken)
+        if cfg.voice.enabled:
+            from ..speech.listener import VoiceListener
+
+            self.voice = VoiceListener(cfg.voice, self._on_heard, self._on_voice_error)
+            self.voice.start()
         self.worker = PlannerWorker(cfg.model_dump(mode="json"), self._on_plan, self._on_worker_exit)
         self._plan_goals = self.belief.goals
         self.worker.start()
@@ -670,6 +728,16 @@ class Daemon:
             await asyncio.get_running_loop().run_in_executor(None, self.speaker.wait_ready, 5.0)
             if not self.speaker.available:
                 self.event("speech_unavailable", error=self.speaker.error)
+            elif self.speaker.player_missing is not None:
+                log.warning("%s", self.speaker.player_missing)
+                self.event("speech_player_missing", player="aplay", package="alsa-utils",
+                           detail=self.speaker.player_missing)
+        deadline = time.monotonic() + self.cfg.runtime.worker_start_timeout_s
+        while self.voice is not None and not self.voice.ready and self.voice.error is None \
+                and time.monotonic() < deadline:
+            await asyncio.sleep(0.02)
+        if self.voice is not None and self.voice.ready:
+            self.event("voice_ready", source=self.voice.source, pid=self.voice.pid)
 
     async def _shutdown(self, tasks: list[asyncio.Task]) -> None:
         """Arm first: zero command and close; then the rest. Never raises."""
@@ -686,6 +754,8 @@ class Daemon:
         await asyncio.gather(*tasks, return_exceptions=True)
         if self.worker is not None:
             self.worker.stop()
+        if self.voice is not None:
+            self.voice.stop()
         if self.speaker is not None:
             self.speaker.close(timeout_s=1.0)
         if self.recorder is not None:

@@ -43,6 +43,8 @@ def status(d: Daemon) -> dict[str, Any]:
         "control": control_dict(d),
         "commands": commands_dict(d),
         "record": record_dict(d),
+        "speech": d.speaker.status() if d.speaker is not None else None,
+        "voice": d.voice.status() if d.voice is not None else None,
     }
 
 

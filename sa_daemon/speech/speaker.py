@@ -5,15 +5,20 @@ utterance goes through a queue to a single ``sa-speech`` thread; the event loop 
 utterance is synthesised with ``save_to_file`` to a 16-bit mono 22050 Hz WAV (in ``speech.wav_dir``
 when set, else a temporary file) and played with ``aplay``. Why not ``engine.say``: in pyttsx3 2.99 the
 espeak driver keeps the last ``save_to_file`` path, so a later ``say`` overwrites that file instead of
-playing; and ``aplay`` as a subprocess can be given a timeout. If no engine can be created, the
-speaker says so once (``available`` false, ``error`` set) and the daemon goes on with published text.
-A hung engine blocks only its own thread: new utterances are dropped while one is pending too long.
+playing; and ``aplay`` as a subprocess can be given a timeout.
+
+The espeak-ng library is the system's or the ``espeakng-loader`` wheel's (``espeak.py``), so speech
+needs no system package. What happens to each question is one of :data:`SPEECH_STATES`, decided when
+the engine comes up (:attr:`Speaker.mode`): ``played`` (synthesised and played through ``aplay``),
+``written`` (synthesised to a WAV only: ``speech.play`` is off, or no ``aplay`` is installed, which
+:attr:`Speaker.player_missing` names once) or ``unavailable`` (no engine). If no engine can be created,
+the speaker says so once (``available`` false, ``error`` set) and the daemon goes on with published
+text. A hung engine blocks only its own thread: new utterances are dropped while one is pending too long.
 """
 
 from __future__ import annotations
 
 import contextlib
-import io
 import logging
 import os
 import queue
@@ -29,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import SpeechConfig
+from . import espeak
 
 log = logging.getLogger(__name__)
 
@@ -40,25 +46,39 @@ def question_text(target: str) -> str:
     return f"Is the {obj} with {grasp} grasp your goal?" if grasp else f"Is the {obj} your goal?"
 
 
+def echo_text(yes: bool, target: str) -> str:
+    """What the robot says back after a spoken answer: ``"Yes: the cup, top grasp"``."""
+    obj, _, grasp = target.partition(":")
+    grasp = grasp.replace("_", " ").strip()
+    return f"{'Yes' if yes else 'No'}: the {obj}" + (f", {grasp} grasp" if grasp else "")
+
+
+SPEECH_STATES = ("played", "written", "unavailable")
+"""What happens to a question's speech (the ``spoken`` field of the ``question`` event)."""
+
+PLAYER = "aplay"
+PLAYER_PACKAGE = "alsa-utils"  # the Debian/Ubuntu package that brings aplay
+
+
 @dataclass(frozen=True)
 class Spoken:
-    """What happened to one utterance: its WAV (``None`` if synthesis failed), whether it played,
-    the time it took (s) and an error text."""
+    """What happened to one utterance. ``outcome``: ``played``; ``written`` (synthesised, not played:
+    playing is off, there is no player, or the player failed, and then ``error`` says why); or
+    ``failed`` (synthesis failed, ``error`` says why). ``wav`` is the file kept in ``speech.wav_dir``
+    (``None`` without one), ``seconds`` the time synthesis and playing took."""
 
     text: str
+    outcome: str
     wav: str | None
-    played: bool
     seconds: float
     error: str | None = None
 
+    @property
+    def played(self) -> bool:
+        return self.outcome == "played"
+
 
 EngineFactory = Callable[[], Any]
-
-
-def _pyttsx3_engine() -> Any:
-    import pyttsx3
-
-    return pyttsx3.init()
 
 
 class Speaker:
@@ -68,16 +88,19 @@ class Speaker:
         self,
         cfg: SpeechConfig,
         on_done: Callable[[Spoken], None] = lambda s: None,
-        engine_factory: EngineFactory = _pyttsx3_engine,
+        engine_factory: EngineFactory | None = None,
         max_pending: int = 4,
     ) -> None:
+        """``engine_factory`` makes the pyttsx3 engine in the speech thread (default: espeak-ng from
+        the library ``speech.library`` selects)."""
         self.cfg = cfg
         self.on_done = on_done
-        self._factory = engine_factory
+        self._factory = engine_factory or (lambda: espeak.pyttsx3_engine(cfg.library))
         self._q: queue.Queue = queue.Queue(maxsize=max_pending)
         self._ready = threading.Event()
-        self.available = False
-        self.error: str | None = None
+        self._available = False
+        self._error: str | None = None
+        self._player_path = shutil.which(PLAYER) if cfg.play else None
         self.dropped = 0
         self.busy_since: float | None = None  # time.monotonic() when the current utterance started
         self._player: subprocess.Popen | None = None  # the aplay process playing now
@@ -85,14 +108,50 @@ class Speaker:
         self._thread = threading.Thread(target=self._run, name="sa-speech", daemon=True)
         self._thread.start()
 
+    # -- what this speaker can do ------------------------------------------------------------------------
+
+    @property
+    def available(self) -> bool:
+        """The engine is up (read after :meth:`wait_ready`)."""
+        return self._available
+
+    @property
+    def error(self) -> str | None:
+        """Why there is no engine, or ``None``."""
+        return self._error
+
+    @property
+    def mode(self) -> str:
+        """What happens to each utterance: one of :data:`SPEECH_STATES`."""
+        if not self._available:
+            return "unavailable"
+        return "played" if self._player_path is not None else "written"
+
+    @property
+    def player_missing(self) -> str | None:
+        """A sentence naming the missing player and its package when playing is on but ``aplay`` is not
+        installed; else ``None``."""
+        if not self.cfg.play or self._player_path is not None:
+            return None
+        return (f"{PLAYER} not found: questions are written as WAV files, not played "
+                f"(install the {PLAYER_PACKAGE} package, e.g. apt-get install {PLAYER_PACKAGE})")
+
+    def status(self) -> dict[str, Any]:
+        """For the daemon's ``status`` reply."""
+        lib = espeak.loaded()
+        return {"mode": self.mode, "library": lib.as_dict() if lib is not None else None,
+                "player": self._player_path, "error": self._error, "dropped": self.dropped}
+
+    # -- use ---------------------------------------------------------------------------------------------
+
     def wait_ready(self, timeout_s: float = 5.0) -> bool:
         """Block until the engine is up (or failed); ``True`` if it is available."""
         self._ready.wait(timeout_s)
-        return self.available
+        return self._available
 
     def say(self, text: str) -> bool:
         """Queue ``text``; ``False`` if dropped (no engine, or too many pending: a hung engine)."""
-        if not self.available:
+        if not self._available:
             return False
         try:
             self._q.put_nowait(text)
@@ -101,14 +160,19 @@ class Speaker:
             return False
         return True
 
+    @property
+    def speaking(self) -> bool:
+        """An utterance is being synthesised or played (or waits for that)."""
+        return self.busy_since is not None or not self._q.empty()
+
     def _run(self) -> None:
         try:
             engine = self._factory()
             engine.setProperty("rate", self.cfg.rate_wpm)
             engine.setProperty("volume", self.cfg.volume)
-            self.available = True
+            self._available = True
         except Exception as e:  # noqa: BLE001 - no engine: say so once, go on without speech
-            self.error = f"speech unavailable: {type(e).__name__}: {e}"
+            self._error = f"speech unavailable: {type(e).__name__}: {e}"
             self._ready.set()
             return
         self._ready.set()
@@ -120,7 +184,7 @@ class Speaker:
             try:
                 spoken = self._speak(engine, text)
             except Exception as e:  # noqa: BLE001 - one failed utterance must not end speech
-                spoken = Spoken(text, None, False, time.monotonic() - self.busy_since, f"{type(e).__name__}: {e}")
+                spoken = Spoken(text, "failed", None, time.monotonic() - self.busy_since, f"{type(e).__name__}: {e}")
             self.busy_since = None
             try:
                 self.on_done(spoken)
@@ -141,26 +205,27 @@ class Speaker:
     def _speak(self, engine: Any, text: str) -> Spoken:
         t0 = time.monotonic()
         path, keep = self._wav_path(text)
-        with contextlib.redirect_stdout(io.StringIO()):  # pyttsx3 prints "Audio saved to ..."
-            engine.save_to_file(text, str(path))
-            engine.runAndWait()
-        played, err = False, None
-        if self.cfg.play:
-            if shutil.which("aplay") is None:
-                err = "aplay not found (install alsa-utils)"
-            else:
-                returncode, stderr = self._play(path)
-                played = returncode == 0
-                if not played:
+        try:
+            espeak.save_wav(engine, text, path)
+            outcome, err = "written", None
+            if self._player_path is not None:
+                try:
+                    returncode, stderr = self._play(path)
+                except OSError as e:  # the player went away since start-up
+                    returncode, stderr = -1, str(e).encode()
+                if returncode == 0:
+                    outcome = "played"
+                else:
                     lines = stderr.decode(errors="replace").strip().splitlines()
-                    err = f"aplay: {lines[-1][:200]}" if lines else "aplay failed"
-        if not keep:
-            path.unlink(missing_ok=True)
-        return Spoken(text, str(path) if keep else None, played, time.monotonic() - t0, err)
+                    err = f"{PLAYER}: {lines[-1][:200]}" if lines else f"{PLAYER} failed"
+        finally:
+            if not keep:
+                path.unlink(missing_ok=True)
+        return Spoken(text, outcome, str(path) if keep else None, time.monotonic() - t0, err)
 
     def _play(self, path: Path) -> tuple[int, bytes]:
         """Run ``aplay`` (killed after 60 s, or by :meth:`close`): its exit code and stderr."""
-        proc = subprocess.Popen(["aplay", "-q", str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        proc = subprocess.Popen([PLAYER, "-q", str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         self._player = proc
         try:
             _, err = proc.communicate(timeout=60)
