@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Standalone client for the sa-daemon ZeroMQ protocol, version 1.
+"""Standalone client for the sa-daemon ZeroMQ protocol, version 2.
 
 Written only from ``docs/protocol.md``; it needs pyzmq and the standard library, and does not
 import ``sa_daemon``.
@@ -55,7 +55,7 @@ __all__ = [
     "summarize_state",
 ]
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 DEFAULT_PUB = "tcp://127.0.0.1:5555"
 DEFAULT_CMD = "tcp://127.0.0.1:5556"
 TOPICS = ("state", "event")

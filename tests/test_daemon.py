@@ -63,7 +63,7 @@ def ho(tmp_path_factory):
 
 def _check_state(s: dict) -> None:
     assert set(s) == STATE_KEYS, set(s) ^ STATE_KEYS
-    assert s["v"] == 1 and s["t"] >= 0
+    assert s["v"] == 2 and s["t"] >= 0
     assert s["mode"] in ("translation", "rotation")
     for k in ("user_twist", "robot_twist", "command_twist"):
         assert len(s[k]) == 6 and all(isinstance(x, (int, float)) and math.isfinite(x) for x in s[k])
@@ -114,7 +114,10 @@ def test_status_command_reports_the_documented_fields(policy):
     assert r["ok"] is True
     assert {"version", "method", "arm", "arm_fault", "input", "input_connected", "planner", "stopped", "assist",
             "uptime_s", "scene", "task", "pid"} <= set(r)
-    assert r["version"] == 1 and r["method"] == "policy" and r["arm"] == "kinematic" and r["scene"] == "scene1"
+    assert r["version"] == 2 and r["method"] == "policy" and r["arm"] == "kinematic" and r["scene"] == "scene1"
+    sp = r["speech"]  # speech after pip alone: the library that speaks, and what happens to questions
+    assert sp["mode"] == "written" and sp["error"] is None and sp["library"]["source"] in ("system", "wheel")
+    assert r["voice"] is None  # voice.enabled is off by default
     assert r["pid"] == policy.proc.pid and r["task"] == "cup:top" and "id" not in r
 
 

@@ -406,7 +406,7 @@ def test_far_oversized_request_gets_no_reply(daemon: Daemon) -> None:
 def test_dealer_client(daemon: Daemon) -> None:
     with pc.CommandClient(daemon.cmd, socket_type="dealer", timeout=REPLY_TIMEOUT) as c:
         reply = c.status()  # the client checks the [b"", json] framing
-        assert reply["ok"] is True and reply["version"] == 1
+        assert reply["ok"] is True and reply["version"] == 2
         refusal = c.request(b"[]")
         assert refusal["ok"] is False and isinstance(refusal["error"], str)
         assert c.status()["ok"] is True

@@ -56,3 +56,12 @@ def test_systemd_analyze_verify(tmp_path):
         ["systemd-analyze", "verify", str(unit)], capture_output=True, text=True, timeout=60, check=False
     )
     assert r.returncode == 0, r.stderr
+
+
+def test_the_service_config_loads_and_turns_voice_on():
+    """systemd/config.toml (installed as /etc/sa-daemon/config.toml) is a valid config over the defaults."""
+    from sa_daemon.config import load_config
+
+    cfg = load_config(str(REPO / "systemd" / "config.toml"))
+    assert cfg.voice.enabled is True and cfg.voice.source == "alsa"
+    assert cfg.runtime.realtime_priority == 10

@@ -13,7 +13,7 @@ from typing import Any
 
 from ..config import METHODS
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 TOPIC_STATE = b"state"
 TOPIC_EVENT = b"event"
 
