@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from .config import METHODS, ConfigError, load_config
+from .config import METHODS, Config, ConfigError, load_config
 from .extras import MissingExtra
 from .planner.goals import parse_target
 from .planner.scene import SceneError, builtin_scene_names, load_scene
@@ -70,13 +70,20 @@ def cmd_bench_planner(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_bench_voice(args: argparse.Namespace) -> int:
-    from .bench.voice import format_table, run_voice_bench, write_json
+def _voice_args(args: argparse.Namespace) -> tuple[Config, float]:
+    """The voice extra present (else one line naming it), the config, and ``--min-confidence`` over
+    ``voice.min_confidence``."""
     from .extras import require
 
     require("pocketsphinx", "voice")
     cfg = load_config(args.config)
-    threshold = cfg.voice.min_confidence if args.min_confidence is None else args.min_confidence
+    return cfg, cfg.voice.min_confidence if args.min_confidence is None else args.min_confidence
+
+
+def cmd_bench_voice(args: argparse.Namespace) -> int:
+    from .bench.voice import format_table, run_voice_bench, write_json
+
+    _, threshold = _voice_args(args)
     r = run_voice_bench(threshold, jobs=args.jobs)
     print(format_table(r))
     if args.json:
@@ -87,14 +94,10 @@ def cmd_bench_voice(args: argparse.Namespace) -> int:
 
 def cmd_hear(args: argparse.Namespace) -> int:
     """One word (yes, no or none) for a WAV file, with the confidence: the recogniser on your voice."""
-    from .extras import require
-
-    require("pocketsphinx", "voice")
+    cfg, threshold = _voice_args(args)
     from .speech.audio import answer_in, wav_to_16k
     from .speech.recogniser import YesNoRecogniser
 
-    cfg = load_config(args.config)
-    threshold = cfg.voice.min_confidence if args.min_confidence is None else args.min_confidence
     word, conf, heard = answer_in(wav_to_16k(args.wav), YesNoRecogniser(), threshold, cfg.voice.max_segment_s)
     print(f"{word} {conf:.2f}")
     if args.verbose:

@@ -93,7 +93,7 @@ def check_state(state: dict) -> list[str]:
         if not cond:
             bad.append(what)
 
-    need(is_int(state.get("v")) and state.get("v") == 1, f"v={state.get('v')!r}")
+    need(is_int(state.get("v")) and state.get("v") == pc.PROTOCOL_VERSION, f"v={state.get('v')!r}")
     need(is_number(state.get("t")) and state["t"] >= 0, f"t={state.get('t')!r}")
     need(state.get("mode") in MODES, f"mode={state.get('mode')!r}")
     for key in ("user_twist", "robot_twist", "command_twist"):
