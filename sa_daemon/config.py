@@ -289,7 +289,7 @@ class VoiceConfig(_Section):
     source: str = Field("alsa", min_length=1, description="alsa | pcm:PATH | wav:PATH")
     device: str = Field("default", min_length=1, description="ALSA capture device for source alsa (arecord -D)")
     min_confidence: float = Field(
-        0.7, ge=0, le=1, description="a recognised yes/no below this confidence is ignored (docs/daemon.md)"
+        0.8, ge=0, le=1, description="a recognised yes/no below this confidence is ignored (docs/daemon.md)"
     )
     listen_s: float = Field(8.0, gt=0, le=120, description="listen this long after the question was spoken (s)")
     after_speech_s: float = Field(
