@@ -64,6 +64,36 @@ def test_stop_latches_until_resume_and_restarts_from_rest():
     assert SafetyCode.ACCEL in r.codes and r.twist[0] == pytest.approx(CFG.linear_accel_mps2 * DT)
 
 
+def test_a_closed_gripper_zeroes_with_its_code_and_reopening_restarts_from_rest():
+    p = pipe()
+    ramp(p, [0.1, 0, 0, 0, 0, 0])
+    r = p.filter([0.1, 0, 0, 0, 0, 0], CENTRE, gripper_closed=True)
+    assert r.codes == (SafetyCode.GRIPPER,) and r.status is SafetyCode.GRIPPER and not np.any(r.twist)
+    r = p.filter([0.1, 0, 0, 0, 0, 0], CENTRE)  # reopened
+    assert SafetyCode.ACCEL in r.codes and r.twist[0] == pytest.approx(CFG.linear_accel_mps2 * DT)
+
+
+_ZEROING = {SafetyCode.STOPPED, SafetyCode.ARM_FAULT, SafetyCode.NAN, SafetyCode.STALE, SafetyCode.GRIPPER}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6), st.booleans()),
+                min_size=2, max_size=60))
+def test_acceleration_limit_holds_across_gripper_close_and_reopen(steps):
+    """What reaches the arm never changes by more than the acceleration limit in one period, except to
+    zero at a zeroing stage; in particular not when the gripper reopens (the first command after it
+    starts from the zero that was sent)."""
+    p = pipe()
+    sent = np.zeros(6)
+    for twist, closed in steps:
+        r = p.filter(np.asarray(twist), CENTRE, gripper_closed=closed)
+        if not set(r.codes) & _ZEROING:
+            assert np.all(np.abs(r.twist - sent) <= AMAX * DT + 1e-12), (sent, r.twist, r.codes)
+        else:
+            assert not np.any(r.twist)
+        sent = r.twist
+
+
 def test_arm_fault_zeroes():
     r = pipe().filter([0.1, 0, 0, 0, 0, 0], CENTRE, fault=True)
     assert r.status is SafetyCode.ARM_FAULT and not np.any(r.twist)

@@ -6,11 +6,14 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
 2. ``arm_fault``     - the driver reports a fault: zero until it is cleared on ``resume``.
 3. ``nan_refused``   - a twist with NaN/inf (or of the wrong shape) becomes zero.
 4. ``stale_input``   - no fresh user input for ``safety.stale_command_s``: zero.
-5. ``speed_limited`` - per-axis linear/angular limits, the whole part scaled so the direction is kept.
-6. ``accel_limited`` - the change from the last output is scaled (direction of the change kept) so no
+5. ``gripper_closed`` - the gripper is closed (as the arm reports it) or closing (commanded, not yet
+   reported): zero, so the arm never drags what it holds. The pipeline's memory of its last output is
+   then zero too, so when the gripper reopens the command restarts from rest under stage 7.
+6. ``speed_limited`` - per-axis linear/angular limits, the whole part scaled so the direction is kept.
+7. ``accel_limited`` - the change from the last output is scaled (direction of the change kept) so no
    axis accelerates beyond ``linear_accel_mps2``/``angular_accel_radps2``.
-7. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
-8. ``singularity_slow``/``singularity_halt`` - when the Jacobian condition number ``k`` is above
+8. ``workspace_limited`` - per axis, the TCP may not cross the workspace box within one period.
+9. ``singularity_slow``/``singularity_halt`` - when the Jacobian condition number ``k`` is above
    ``slow`` and the command moves toward the singularity, its component along the weakest direction
    ``u`` is scaled by ``1 - (k - slow) / (stop - slow)``, and removed at ``stop``; the rest of the
    command passes (MoveIt Servo scales the whole command, which also held the motion that would have
@@ -25,13 +28,14 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
    singularity takes away, and passes: the xArm-6 crosses its wrist singularity (joint 5 = 0) in a
    vertical plane this way, pitching or translating, with small joint speeds. The dead band (MoveIt
    uses 0) keeps joystick noise from toggling the halt.
-9. ``joint_bound``   - a joint within ``joint_margin_rad`` of a bound and moving toward it halts the
+10. ``joint_bound``  - a joint within ``joint_margin_rad`` of a bound and moving toward it halts the
    command (and a joint speed above its limit scales the command).
 
-Stages 1-4 zero the command at once (a stop is never softened by the acceleration limit); stages 7-9
-only reduce speeds. So every output is finite, within the speed limits, never leaves the box, and
-changes by at most the acceleration limit unless a zeroing or position stage says why it did not.
-Stages 8-9 apply to arms with joints (``Arm.kinematics``); the kinematic arm has none.
+Stages 1-5 zero the command at once (a stop is never softened by the acceleration limit) and
+restart the next command from rest; stages 8-10 only reduce speeds. So every output is finite,
+within the speed limits, never leaves the box, and changes by at most the acceleration limit from
+the last output unless a zeroing or position stage says why it did not. Stages 9-10 apply to arms
+with joints (``Arm.kinematics``); the kinematic arm has none.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ class SafetyCode(str, Enum):
     JOINT_SPEED = "joint_speed_limited"
     SINGULARITY_HALT = "singularity_halt"
     JOINT_BOUND = "joint_bound"
+    GRIPPER = "gripper_closed"
     STALE = "stale_input"
     NAN = "nan_refused"
     ARM_FAULT = "arm_fault"
@@ -141,8 +146,10 @@ class SafetyPipeline:
         input_fresh: bool = True,
         fault: bool = False,
         joints: FloatArray | None = None,
+        gripper_closed: bool = False,
     ) -> SafetyResult:
-        """Run every stage on ``twist`` at TCP ``pose`` (and joint positions ``joints``, rad)."""
+        """Run every stage on ``twist`` at TCP ``pose`` (and joint positions ``joints``, rad);
+        ``gripper_closed``: the gripper is closed or closing (stage 5)."""
         if self._stopped:
             return self._zero(SafetyCode.STOPPED)
         if fault:
@@ -152,6 +159,8 @@ class SafetyPipeline:
             return self._zero(SafetyCode.NAN)
         if not input_fresh:
             return self._zero(SafetyCode.STALE)
+        if gripper_closed:
+            return self._zero(SafetyCode.GRIPPER)
         codes: list[SafetyCode] = []
         out = limit_twist(t, self.limits.linear_mps, self.limits.angular_radps)
         if not np.allclose(out, t, rtol=0, atol=1e-12):

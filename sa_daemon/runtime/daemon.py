@@ -564,9 +564,8 @@ class Daemon:
             self.event("fault", source="command", detail=str(e))
         result = safety.filter(
             cmd.total_twist, state.pose, input_fresh=fresh, fault=state.fault is not None, joints=state.joints,
+            gripper_closed=state.gripper_closed or self.gripper_closed,  # closed, or closing (not yet reported)
         )
-        if self.gripper_closed:
-            result = SafetyResult(np.zeros(6), result.codes)
         arm.command_twist(result.twist)
         sent = time.monotonic()
         if fresh and self.input_seq != self._commanded_seq:

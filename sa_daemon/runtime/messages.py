@@ -116,7 +116,7 @@ def state_message(d: Daemon) -> dict[str, Any]:
         "robot_twist": protocol.finite_list(cmd.robot_twist),
         "command_twist": protocol.finite_list(res.twist),
         "gripper_pose": pose,
-        "gripper_closed": d.gripper_closed,
+        "gripper_closed": bool(st is not None and st.gripper_closed),  # as the arm reports it
         "belief": belief_list(d),
         "action": action_dict(action),
         "question": d.question.text if d.question is not None else None,
