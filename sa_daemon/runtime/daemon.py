@@ -605,6 +605,8 @@ class Daemon:
 
     def request_stop(self, reason: str) -> None:
         if self._stop_event is not None and not self._stop_event.is_set():
+            if self.safety is not None:  # from now on every control tick commands zero, until the arm closes
+                self.safety.stop()
             self.event("shutdown", reason=reason)
             self._stop_event.set()
 
