@@ -9,6 +9,7 @@ taken for a "yes", and phrases that are not answers, noise and silence are never
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import subprocess
 import sys
@@ -255,8 +256,8 @@ min_confidence = 0.0
     spoken = threading.Event()
     yes = wav_to_16k(wavs / "yes_en-us.wav").tobytes()
 
-    def microphone() -> None:  # silence in real time, and "yes" once asked to
-        with open(fifo, "wb", buffering=0) as w:
+    def microphone() -> None:  # silence in real time, and "yes" once asked to; ends when the daemon does
+        with open(fifo, "wb", buffering=0) as w, contextlib.suppress(BrokenPipeError):
             while not stop.is_set():
                 data = bytes(3200)
                 if spoken.is_set():
