@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+from .arm.factory import SIMULATED_BACKENDS
 from .config import METHODS, Config, ConfigError, load_config
 from .extras import MissingExtra
 from .planner.goals import parse_target
@@ -129,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", help="write trials and summary to this file")
     e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
     e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    e.add_argument("--arm", choices=["kinematic", "mujoco"], default="kinematic",
+    e.add_argument("--arm", choices=SIMULATED_BACKENDS, default="kinematic",
                    help="kinematic: exact twist integration; mujoco: physics, success also needs a lift")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_eval)

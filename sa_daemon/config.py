@@ -22,6 +22,10 @@ from pydantic import (
     model_validator,
 )
 
+# The one registry of arm backends and the one list of methods; neither imports the package at load time.
+from .arm.factory import BACKENDS
+from .planner.methods import METHODS
+
 PositiveFloat = float
 
 
@@ -243,9 +247,16 @@ class XArmConfig(_Section):
 class ArmConfig(_Section):
     """Which arm drives the gripper, and its backend settings."""
 
-    backend: str = Field("mujoco", pattern="^(kinematic|mujoco|xarm)$", description="kinematic, mujoco or xarm")
+    backend: str = Field("mujoco", description="kinematic, mujoco or xarm (arm/factory.py's registry)")
     mujoco: MujocoConfig = MujocoConfig()
     xarm: XArmConfig = XArmConfig()
+
+    @field_validator("backend")
+    @classmethod
+    def _backend(cls, v: str) -> str:
+        if v not in BACKENDS:
+            raise ValueError(f"must be one of {', '.join(BACKENDS)}, not {v!r}")
+        return v
 
 
 class JoystickConfig(_Section):
@@ -371,16 +382,6 @@ class RecordConfig(_Section):
     flush_s: float = Field(1.0, gt=0, le=10, description="data reaches the disk at least this often (s)")
 
 
-METHODS = (
-    "manual",
-    "ho",
-    "ho+noassist",
-    "blend",
-    "policy",
-    "policy+noqns",
-    "policy+withoutnoassist",
-    "policy+noho",
-)
 
 
 class Config(_Section):

@@ -9,8 +9,14 @@ from __future__ import annotations
 
 import pytest
 
-from sa_daemon.arm.factory import BACKENDS, JOINTED_BACKENDS, make_arm
-from sa_daemon.config import config_from_dict
+from sa_daemon.arm.factory import (
+    BACKENDS,
+    JOINTED_BACKENDS,
+    SIMULATED_BACKENDS,
+    make_arm,
+)
+from sa_daemon.cli import build_parser
+from sa_daemon.config import ConfigError, config_from_dict
 from sa_daemon.planner.scene import load_scene
 
 
@@ -27,3 +33,16 @@ def test_jointed_backends_are_exactly_the_arms_with_kinematics(backend: str) -> 
 def test_unknown_backend_is_refused_naming_the_choices() -> None:
     with pytest.raises(ValueError, match="kinematic, mujoco, xarm"):
         make_arm("ur5", load_scene("scene1"), config_from_dict({}))
+
+
+def test_every_place_that_names_a_backend_reads_the_registry() -> None:
+    """Config validation, ``run --arm`` and ``eval --arm`` take their names from the one registry."""
+    for name in BACKENDS:
+        assert config_from_dict({"arm": {"backend": name}}).arm.backend == name
+    with pytest.raises(ConfigError, match=r"arm.backend.*kinematic, mujoco, xarm"):
+        config_from_dict({"arm": {"backend": "ur5"}})
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices
+    run_arm = next(a for a in sub["run"]._actions if a.dest == "arm")
+    eval_arm = next(a for a in sub["eval"]._actions if a.dest == "arm")
+    assert tuple(run_arm.choices) == BACKENDS
+    assert tuple(eval_arm.choices) == SIMULATED_BACKENDS == ("kinematic", "mujoco")

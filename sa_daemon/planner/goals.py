@@ -34,11 +34,6 @@ class GraspType(str, Enum):
     SIDE_VERTICAL = "side_vertical"
 
     @property
-    def words(self) -> str:
-        """Spoken form, e.g. ``"side horizontal"``."""
-        return self.value.replace("_", " ")
-
-    @property
     def is_top(self) -> bool:
         return self.value.startswith("top")
 
@@ -75,11 +70,6 @@ class Goal:
     def target(self) -> str:
         """High-level target name, ``"object:grasp_type"``."""
         return f"{self.object}:{self.grasp_type.value}"
-
-    @property
-    def question(self) -> str:
-        """The question that asks about this goal's high-level target."""
-        return f"Is the {self.object} with {self.grasp_type.words} grasp your goal?"
 
     @cached_property
     def positions(self) -> FloatArray:

@@ -1,4 +1,5 @@
-"""The assistance methods compared in the paper, selectable by name everywhere.
+"""The assistance methods compared in the paper, selectable by name everywhere; defined here only
+(this module imports nothing of the package, so ``config.py`` reads it).
 
 ``policy`` and its ablations plan over the POMDP's high-level actions; the baselines follow fixed rules:
 
@@ -17,8 +18,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from ..config import METHODS
 
 
 @dataclass(frozen=True)
@@ -43,7 +42,8 @@ _SPECS = {
     "policy+withoutnoassist": MethodSpec("policy+withoutnoassist", planned=True, moves=True, ho=True, questions=True),
     "policy+noho": MethodSpec("policy+noho", planned=True, moves=True, noassist=True, questions=True),
 }
-assert tuple(_SPECS) == METHODS
+METHODS = tuple(_SPECS)
+"""Every method's name, in the paper's order: the one list (config validation and the CLI read it)."""
 
 
 def method_spec(name: str) -> MethodSpec:

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..arm.factory import JOINTED_BACKENDS
+from ..arm.factory import BACKENDS, JOINTED_BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
 from ..planner.scene import builtin_scene_names, load_scene
 
@@ -182,7 +182,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--scene", help=f"built-in scene ({', '.join(builtin_scene_names())}; default {DEFAULT_SCENE})")
     g.add_argument("--scene-file", help="scene TOML file (docs/scenes.md)")
-    p.add_argument("--arm", choices=["kinematic", "mujoco", "xarm"], help="arm backend (default: config arm.backend)")
+    p.add_argument("--arm", choices=BACKENDS, help="arm backend (default: config arm.backend)")
     p.add_argument("--input", choices=["sim", "evdev"], default="sim", help="joystick or simulated user")
     p.add_argument("--task", action="append", help=f"sim user's task object:grasp_type, repeatable (default {DEFAULT_TASK})")
     p.add_argument("--method", choices=METHODS, help="assistance method (default: config method)")
