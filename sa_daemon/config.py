@@ -238,6 +238,9 @@ class XArmConfig(_Section):
     """The real xArm-6 through the xArm Python SDK (``--arm xarm``, extra ``xarm``)."""
 
     ip: str = Field("192.168.1.185", min_length=1, description="controller address")
+    sdk: Literal["real", "fake"] = Field(
+        "real", description="real: the xArm SDK (extra xarm); fake: sa_daemon/testing/fake_xarm.py, for tests and demos"
+    )
     command_periods: float = Field(3.0, ge=1, le=20, description="command duration = this many control periods")
     gripper_speed: float = Field(2000.0, gt=0, le=5000, description="SDK gripper speed (r/min)")
     reconnect_min_s: float = Field(0.5, gt=0, description="first reconnect delay; doubles up to the max (s)")

@@ -10,7 +10,7 @@ runs the real command line (:func:`sa_daemon.cli.main`) in this process after in
   on the daemon's event loop. A device has ``capabilities()``/``absinfo()`` like a 3-axis stick; after
   an unplug it is gone from ``list_devices``, its open handles poll readable and every read fails with
   ``OSError(ENODEV)``, as the kernel's evdev does. One stick is plugged at start.
-* **access to the fake xArm** - the ``FakeXArmAPI`` the daemon builds for ``[arm.xarm] ip = "fake"`` is
+* **access to the fake xArm** - the ``FakeXArmAPI`` the daemon builds for ``[arm.xarm] sdk = "fake"`` is
   recorded (a subclass that can also report a NaN pose, as a corrupt report would).
 * **the speech engine boundary** - ``pyttsx3.init`` can be made to raise (``--speech-init fail``), and
   the engine it returns can be made to fail or hang on command. The sound-card boundary needs no patch:
@@ -85,7 +85,7 @@ class Faultd:
     @property
     def arm(self) -> Any:
         if not self.arms:
-            raise RuntimeError("no fake xArm (run with --arm xarm and [arm.xarm] ip = \"fake\")")
+            raise RuntimeError("no fake xArm (run with --arm xarm and [arm.xarm] sdk = \"fake\")")
         return self.arms[-1]
 
 
@@ -259,7 +259,7 @@ def install_evdev() -> None:
 
 
 def install_xarm() -> None:
-    from sa_daemon.arm import fake_xarm
+    from sa_daemon.testing import fake_xarm
 
     base = fake_xarm.FakeXArmAPI
 

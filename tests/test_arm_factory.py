@@ -22,7 +22,7 @@ from sa_daemon.planner.scene import load_scene
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_jointed_backends_are_exactly_the_arms_with_kinematics(backend: str) -> None:
-    cfg = config_from_dict({"arm": {"xarm": {"ip": "fake"}}})  # the documented fake SDK: no arm needed
+    cfg = config_from_dict({"arm": {"xarm": {"sdk": "fake"}}})  # the documented fake SDK: no arm needed
     arm = make_arm(backend, load_scene("scene1"), cfg)
     try:
         assert (arm.kinematics is not None) == (backend in JOINTED_BACKENDS)

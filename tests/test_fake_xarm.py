@@ -16,7 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sa_daemon.arm.fake_xarm import (
+from sa_daemon.geometry import quat_to_matrix, rpy_to_quat
+from sa_daemon.testing.fake_xarm import (
     DEFAULT_START_MM_RAD,
     END_EFFECTOR_HAS_FAULT,
     END_EFFECTOR_NOT_ENABLED,
@@ -29,7 +30,6 @@ from sa_daemon.arm.fake_xarm import (
     FakeXArmAPI,
     matrix_to_rpy,
 )
-from sa_daemon.geometry import quat_to_matrix, rpy_to_quat
 
 
 class Clock:

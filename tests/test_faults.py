@@ -265,7 +265,7 @@ def test_planner_worker_killed_or_hung_falls_back_and_is_replaced(tmp_path, sig)
 
 XARM_CONFIG = """\
 [arm.xarm]
-ip = "fake"
+sdk = "fake"
 reconnect_min_s = 0.1
 reconnect_max_s = 0.8
 

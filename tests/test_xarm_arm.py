@@ -16,7 +16,6 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
-from sa_daemon.arm.fake_xarm import SDK_METHODS, FakeXArmAPI
 from sa_daemon.arm.xarm_arm import (
     CLOSED,
     DISCONNECTED,
@@ -28,13 +27,14 @@ from sa_daemon.arm.xarm_arm import (
     twist_to_speeds,
 )
 from sa_daemon.config import Config, config_from_dict
+from sa_daemon.testing.fake_xarm import SDK_METHODS, FakeXArmAPI
 
 WAIT_S = 10.0  # generous: only ever reached when something is broken
 VC = "vc_set_cartesian_velocity"
 
 
 def make_cfg(**xarm) -> Config:
-    base = {"ip": "fake", "reconnect_min_s": 0.05, "reconnect_max_s": 0.2}
+    base = {"sdk": "fake", "reconnect_min_s": 0.05, "reconnect_max_s": 0.2}
     base.update(xarm)
     return config_from_dict({"arm": {"xarm": base}})
 
@@ -150,7 +150,7 @@ def test_old_firmware_is_a_fault(fake):
         arm.close()
 
 
-def test_fake_ip_uses_the_fake_through_the_factory():
+def test_sdk_fake_uses_the_fake_through_the_factory():
     from sa_daemon.arm.factory import make_arm
     from sa_daemon.planner.scene import load_scene
 
@@ -185,7 +185,7 @@ def test_twist_becomes_mm_and_rad_per_s_with_duration(arm, fake):
 
 def test_duration_follows_control_rate_and_is_capped_at_250_hz():
     for hz, rate in ((50.0, 50.0), (500.0, 250.0)):
-        cfg = config_from_dict({"runtime": {"control_hz": hz}, "arm": {"xarm": {"ip": "fake", "command_periods": 4}}})
+        cfg = config_from_dict({"runtime": {"control_hz": hz}, "arm": {"xarm": {"sdk": "fake", "command_periods": 4}}})
         arm = XArm(cfg)
         try:
             assert arm.rate_hz == rate and arm.duration_s == pytest.approx(4.0 / rate)

@@ -124,12 +124,13 @@ class _Work:
         return bool(self.link_lost or self.zero or self.reset or self.gripper is not None or self.twist or self.poll)
 
 
-def _default_api_factory(ip: str) -> Callable[[], Any]:
-    """``XArmAPI(ip, is_radian=True, do_not_open=True)``, imported lazily; the fake for ``ip == "fake"``."""
-    if ip == "fake":
-        from .fake_xarm import FakeXArmAPI
+def _default_api_factory(ip: str, sdk: str = "real") -> Callable[[], Any]:
+    """``XArmAPI(ip, is_radian=True, do_not_open=True)``, imported lazily; with ``sdk = "fake"`` (config
+    ``arm.xarm.sdk``) the documented fake, ``sa_daemon/testing/fake_xarm.py``."""
+    if sdk == "fake":
+        from ..testing.fake_xarm import FakeXArmAPI
 
-        return lambda: FakeXArmAPI("fake", is_radian=True, do_not_open=True)
+        return lambda: FakeXArmAPI(ip, is_radian=True, do_not_open=True)
     try:
         sdk = require("xarm.wrapper", "xarm")
     except MissingExtra as e:  # a ConfigError: the message starts with the key, arm.backend
@@ -207,7 +208,7 @@ class XArm(Arm):
             "note": None,
         }
 
-        self._api = (api_factory or _default_api_factory(xc.ip))()
+        self._api = (api_factory or _default_api_factory(xc.ip, xc.sdk))()
         self._api.register_error_warn_changed_callback(self._on_error_warn)
         self._api.register_connect_changed_callback(self._on_connect_changed)
 

@@ -1,6 +1,6 @@
 """A stand-in for the xArm SDK's ``xarm.wrapper.XArmAPI`` that enforces its documented rules.
 
-Used by the tests and by a daemon configured with ``[arm.xarm] ip = "fake"``. It is not a physics model:
+Used by the tests and by a daemon configured with ``[arm.xarm] sdk = "fake"``. It is not a physics model:
 it is a strict model of the *protocol*, so that a driver calling the SDK in the wrong order, with the
 wrong units or without checking return codes fails here as it would on the arm.
 
