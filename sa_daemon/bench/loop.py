@@ -12,12 +12,14 @@ also serve ``bench soak``.
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from ..config import Config
+from ..runtime.launch import Launch, build_daemon
 
 
 def rss_mb(pid: int | None = None) -> float:
@@ -51,20 +53,20 @@ class BenchRun:
     subscribers: dict[str, Any] = field(default_factory=dict)
 
 
-def run_daemon(args: argparse.Namespace, sample_every_s: float = 1.0) -> BenchRun:
-    """Run the daemon of ``args`` in this process for ``args.duration`` s (tasks back to back), sampling
-    RSS every ``sample_every_s`` s, with ``args.subscribers`` reading and ``args.stalled_subscribers``
-    never-reading subscribers in another process when given (see :mod:`.subscribers`)."""
+def run_daemon(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscribers: int = 0,
+               sample_every_s: float = 1.0) -> BenchRun:
+    """Run the daemon ``cfg`` and ``launch`` describe in this process for ``launch.duration_s`` s (give
+    ``exit_when_done=False`` for tasks back to back), sampling RSS every ``sample_every_s`` s, with
+    ``subscribers`` reading and ``stalled_subscribers`` never-reading subscribers in another process
+    (see :mod:`.subscribers`)."""
     import asyncio
 
     from ..runtime.rate import new_event_loop
-    from ..runtime.verbs import build_daemon
     from .subscribers import SubscriberSwarm
 
-    daemon = build_daemon(args)
-    daemon.opts.exit_when_done = False
+    daemon = build_daemon(cfg, launch)
     run = BenchRun(daemon, 0.0)
-    n_read, n_stalled = getattr(args, "subscribers", 0) or 0, getattr(args, "stalled_subscribers", 0) or 0
+    n_read, n_stalled = subscribers, stalled_subscribers
     swarm = SubscriberSwarm(daemon.opts.pub, n_read, n_stalled) if n_read or n_stalled else None
 
     async def sample() -> None:
@@ -131,9 +133,10 @@ def loop_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
-def run_loop_bench(args: argparse.Namespace) -> dict[str, Any]:
-    """Run the daemon for ``args.duration`` s and return the figures (see module doc)."""
-    return loop_figures(run_daemon(args))
+def run_loop_bench(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscribers: int = 0
+                   ) -> dict[str, Any]:
+    """Run the daemon for ``launch.duration_s`` s and return the figures (see module doc)."""
+    return loop_figures(run_daemon(cfg, launch, subscribers, stalled_subscribers))
 
 
 def format_loop(f: dict[str, Any]) -> str:

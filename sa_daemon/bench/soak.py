@@ -22,13 +22,13 @@ of the daemon's process and of the planner worker sampled every ``--sample-every
 
 from __future__ import annotations
 
-import argparse
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from ..config import load_config
+from ..config import Config
+from ..runtime.launch import Launch
 from .loop import RssSample, loop_figures, run_daemon, subscriber_rows
 from .platform import PlatformProbe
 
@@ -78,19 +78,34 @@ def _criterion(name: str, value: float | None, limit: float) -> dict[str, Any]:
     return {"name": name, "value": value, "limit": limit, "pass": value is not None and value <= limit}
 
 
-def run_soak(args: argparse.Namespace) -> dict[str, Any]:
-    """Run the soak of ``args`` and return its figures and verdicts (see module doc)."""
-    warm = warmup_s(args.duration)
-    if args.sample_every <= 0 or args.duration - warm < 2 * args.sample_every:
-        raise ValueError(f"--sample-every {args.sample_every} s leaves fewer than 3 samples after the "
-                         f"{warm:.1f} s warm-up of a {args.duration} s soak")
+@dataclass(frozen=True)
+class SoakSpec:
+    """A soak: its length (s), the RSS sampling period (s), the criteria (RSS growth after warm-up, %;
+    control overruns allowed), and whether the machine's stalls are probed beside it."""
+
+    duration_s: float = 600.0
+    sample_every_s: float = 5.0
+    max_growth_pct: float = 5.0
+    max_overruns: int = 0
+    platform_probe: bool = True
+
+
+def run_soak(cfg: Config, launch: Launch, spec: SoakSpec, subscribers: int = 0, stalled_subscribers: int = 0
+             ) -> dict[str, Any]:
+    """Run the soak ``spec`` of the daemon ``cfg`` and ``launch`` describe (its duration is the spec's)
+    and return its figures and verdicts (see module doc)."""
+    warm = warmup_s(spec.duration_s)
+    if spec.sample_every_s <= 0 or spec.duration_s - warm < 2 * spec.sample_every_s:
+        raise ValueError(f"--sample-every {spec.sample_every_s} s leaves fewer than 3 samples after the "
+                         f"{warm:.1f} s warm-up of a {spec.duration_s} s soak")
     probe = None
-    half_period = 0.5 / load_config(args.config).runtime.control_hz
-    if getattr(args, "platform_probe", True):
+    half_period = 0.5 / cfg.runtime.control_hz
+    if spec.platform_probe:
         probe = PlatformProbe(half_period)
         probe.start()
     try:
-        run = run_daemon(args, sample_every_s=args.sample_every)
+        run = run_daemon(cfg, replace(launch, duration_s=spec.duration_s, exit_when_done=False),
+                         subscribers, stalled_subscribers, sample_every_s=spec.sample_every_s)
     finally:
         latency = probe.stop() if probe is not None else None
     platform: dict[str, Any] = (
@@ -105,17 +120,17 @@ def run_soak(args: argparse.Namespace) -> dict[str, Any]:
         platform["overrun_stalls"] = [None if m is None else m.as_row() for m in matched]
     daemon_rss, worker_rss = memory_figures(run.rss, warm)
     criteria = [
-        _criterion("daemon RSS growth %", daemon_rss["growth_pct"], args.max_growth_pct),
-        _criterion("worker RSS growth %", worker_rss["growth_pct"], args.max_growth_pct),
-        _criterion("control overruns", loop["overruns"], args.max_overruns),
+        _criterion("daemon RSS growth %", daemon_rss["growth_pct"], spec.max_growth_pct),
+        _criterion("worker RSS growth %", worker_rss["growth_pct"], spec.max_growth_pct),
+        _criterion("control overruns", loop["overruns"], spec.max_overruns),
     ]
     return {
         "duration_s": loop["duration_s"],
-        "soak_s": args.duration,
+        "soak_s": spec.duration_s,
         "arm": loop["arm"],
         "method": loop["method"],
         "warmup_s": warm,
-        "sample_every_s": args.sample_every,
+        "sample_every_s": spec.sample_every_s,
         "daemon_rss": daemon_rss,
         "worker_rss": worker_rss,
         "overruns": loop["overruns"],

@@ -9,12 +9,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..arm.factory import BACKENDS, JOINTED_BACKENDS
+from ..arm.factory import BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
-from ..planner.scene import builtin_scene_names, load_scene
-
-DEFAULT_SCENE = "scene1"
-DEFAULT_TASK = "cup:top"  # the paper's task 1
+from ..planner.scene import builtin_scene_names
+from .launch import DEFAULT_SCENE, DEFAULT_TASK, Launch
 
 
 def override(cfg: Config, updates: dict[str, Any]) -> Config:
@@ -40,7 +38,8 @@ _FLAG_KEYS = {
 }
 
 
-def _run_config(args: argparse.Namespace) -> Config:
+def run_config(args: argparse.Namespace) -> Config:
+    """The config file (``--config``) with ``run``'s flags over it."""
     cfg = load_config(args.config)
     updates: dict[str, Any] = {key: getattr(args, flag) for flag, key in _FLAG_KEYS.items() if getattr(args, flag)}
     if args.no_speech:
@@ -48,26 +47,18 @@ def _run_config(args: argparse.Namespace) -> Config:
     return override(cfg, updates) if updates else cfg
 
 
+def launch_of(args: argparse.Namespace, exit_when_done: bool | None = None) -> Launch:
+    """``run``'s flags as a :class:`~.launch.Launch`."""
+    return Launch(scene=args.scene_file or args.scene or DEFAULT_SCENE, tasks=tuple(args.task or ()),
+                  input=args.input, duration_s=args.duration, seed=args.seed, progress=not args.quiet,
+                  exit_when_done=exit_when_done)
+
+
 def build_daemon(args: argparse.Namespace) -> Any:
-    """The :class:`~.daemon.Daemon` that ``run`` (and ``bench loop``) would start."""
-    from .daemon import Daemon, RunOptions
+    """The :class:`~.daemon.Daemon` that ``run`` would start (built by the composition root, ``launch.py``)."""
+    from .launch import build_daemon as build
 
-    cfg = _run_config(args)
-    scene = load_scene(args.scene_file or args.scene or DEFAULT_SCENE)
-    tasks = args.task or ([DEFAULT_TASK] if DEFAULT_TASK in scene.targets else scene.targets[:1])
-    for t in tasks:
-        scene.goal(t)  # an unknown task is refused before anything starts (KeyError naming it)
-    if cfg.arm.backend in JOINTED_BACKENDS:  # the goals keep the poses the xArm-6 reaches (arm/reach.py)
-        from ..arm.kinematics import ArmKinematics
-        from ..arm.reach import reachable_scene
-
-        scene = reachable_scene(scene, ArmKinematics(), cfg.safety.joint_margin_rad)
-    opts = RunOptions(
-        scene=scene, arm=cfg.arm.backend, input=args.input, tasks=tasks, method=cfg.method,
-        pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=args.duration, record=cfg.record.path or None,
-        seed=args.seed, progress=not args.quiet, exit_when_done=args.duration is None,
-    )
-    return Daemon(cfg, opts)
+    return build(run_config(args), launch_of(args))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -161,7 +152,8 @@ def _write_figures(path: str | None, figs: dict[str, Any]) -> None:
 def cmd_bench_loop(args: argparse.Namespace) -> int:
     from ..bench.loop import format_loop, run_loop_bench
 
-    figs = run_loop_bench(args)
+    figs = run_loop_bench(run_config(args), launch_of(args, exit_when_done=False), args.subscribers,
+                          args.stalled_subscribers)
     print(format_loop(figs))
     _write_figures(args.json, figs)
     return 0
@@ -169,9 +161,11 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
 
 def cmd_bench_soak(args: argparse.Namespace) -> int:
     """Exit 0 when every soak criterion passes, 1 when one fails."""
-    from ..bench.soak import format_soak, run_soak
+    from ..bench.soak import SoakSpec, format_soak, run_soak
 
-    figs = run_soak(args)
+    spec = SoakSpec(args.duration, args.sample_every, args.max_growth_pct, args.max_overruns, args.platform_probe)
+    figs = run_soak(run_config(args), launch_of(args, exit_when_done=False), spec, args.subscribers,
+                    args.stalled_subscribers)
     print(format_soak(figs))
     _write_figures(args.json, figs)
     return 0 if figs["pass"] else 1
