@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from .arm.factory import SIMULATED_BACKENDS
+from .arm.backends import SIMULATED_BACKENDS
 from .config import METHODS, Config, ConfigError, load_config
 from .extras import MissingExtra
 from .planner.goals import parse_target

@@ -23,7 +23,7 @@ from pydantic import (
 )
 
 # The one registry of arm backends and the one list of methods; neither imports the package at load time.
-from .arm.factory import BACKENDS
+from .arm.backends import BACKENDS
 from .planner.methods import METHODS
 
 PositiveFloat = float
@@ -250,7 +250,7 @@ class XArmConfig(_Section):
 class ArmConfig(_Section):
     """Which arm drives the gripper, and its backend settings."""
 
-    backend: str = Field("mujoco", description="kinematic, mujoco or xarm (arm/factory.py's registry)")
+    backend: str = Field("mujoco", description="kinematic, mujoco or xarm (arm/backends.py's registry)")
     mujoco: MujocoConfig = MujocoConfig()
     xarm: XArmConfig = XArmConfig()
 

@@ -1,4 +1,4 @@
-"""The arm factory: one name per backend, and ``JOINTED_BACKENDS`` agrees with the arms it builds.
+"""The arm registry and factory: one name per backend, and ``JOINTED_BACKENDS`` agrees with the arms it builds.
 
 ``run`` filters the scene's grasp poses by reachability *before* it builds the arm (from the backend's
 name, ``JOINTED_BACKENDS``); ``eval`` filters after (from ``arm.kinematics``). Both must mean the
@@ -9,12 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from sa_daemon.arm.factory import (
-    BACKENDS,
-    JOINTED_BACKENDS,
-    SIMULATED_BACKENDS,
-    make_arm,
-)
+from sa_daemon.arm.backends import BACKENDS, JOINTED_BACKENDS, SIMULATED_BACKENDS
+from sa_daemon.arm.factory import make_arm
 from sa_daemon.cli import build_parser
 from sa_daemon.config import ConfigError, config_from_dict
 from sa_daemon.planner.scene import load_scene

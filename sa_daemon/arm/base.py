@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..geometry import FloatArray, Pose
+
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..planner.scene import Scene
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,12 @@ class Arm(abc.ABC):
     #: Joint-space kinematics for the safety pipeline (singularity and joint-margin stages); ``None`` for
     #: an arm without joints.
     kinematics: Kinematics | None = None
+
+    @classmethod
+    @abc.abstractmethod
+    def from_config(cls, scene: Scene, cfg: Config) -> Arm:
+        """The arm for ``scene`` (a simulated arm starts at ``scene.start``) configured by ``cfg``: how the
+        registry (``factory.py``) builds every backend."""
 
     @abc.abstractmethod
     def read(self) -> ArmState:

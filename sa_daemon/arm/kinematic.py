@@ -2,17 +2,27 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..config import LimitsConfig
 from ..geometry import FloatArray, Pose, integrate_pose
 from .base import Arm, ArmState, limit_twist
 
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..planner.scene import Scene
+
 
 class KinematicArm(Arm):
     """The TCP follows the commanded twist exactly, within the configured per-axis speed limits."""
 
     name = "kinematic"
+
+    @classmethod
+    def from_config(cls, scene: Scene, cfg: Config) -> KinematicArm:
+        return cls(scene.start, cfg.limits)
 
     def __init__(self, start: Pose, limits: LimitsConfig | None = None) -> None:
         self._limits = limits or LimitsConfig()

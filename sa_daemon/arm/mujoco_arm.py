@@ -65,6 +65,10 @@ class MujocoArm(Arm):
 
     name = "mujoco"
 
+    @classmethod
+    def from_config(cls, scene: Scene, cfg: Config) -> MujocoArm:
+        return cls(scene, cfg)
+
     def __init__(self, scene: Scene, cfg: Config | None = None, *, viewer: bool | None = None) -> None:
         cfg = cfg or Config()
         self._limits = cfg.limits

@@ -26,7 +26,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from ..config import Config, ConfigError
 from ..extras import MissingExtra, require
 from ..geometry import FloatArray, Pose
 from .base import Arm, ArmState, Kinematics, limit_twist
+
+if TYPE_CHECKING:
+    from ..planner.scene import Scene
 
 log = logging.getLogger(__name__)
 
@@ -159,6 +162,10 @@ class XArm(Arm):
 
     name = "xarm"
     realtime = True
+
+    @classmethod
+    def from_config(cls, scene: Scene, cfg: Config) -> XArm:
+        return cls(cfg)  # the real arm is where it is: the scene does not place it
 
     def __init__(self, cfg: Config, api_factory: Callable[[], Any] | None = None,
                  kinematics: Kinematics | None = None) -> None:

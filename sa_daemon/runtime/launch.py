@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..arm.factory import backend
+from ..arm.backends import backend
 from ..config import Config
 from ..planner.scene import load_scene
 from .daemon import Daemon, RunOptions

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..arm.factory import BACKENDS
+from ..arm.backends import BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
 from ..planner.scene import builtin_scene_names
 from .launch import DEFAULT_SCENE, DEFAULT_TASK, Launch
