@@ -10,10 +10,10 @@ import pytest
 from sa_daemon import cli
 from sa_daemon.arm.kinematics import ArmKinematics, start_configuration
 from sa_daemon.arm.reach import reachable_scene, reaches
+from sa_daemon.cli import verbs
 from sa_daemon.geometry import Pose
 from sa_daemon.planner.goals import Goal, GraspType
 from sa_daemon.planner.scene import load_scene
-from sa_daemon.runtime import verbs
 
 MARGIN = 0.1
 

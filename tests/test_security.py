@@ -28,6 +28,7 @@ from helpers import free_port
 from zmq.auth.thread import AuthenticationThread
 
 from sa_daemon import cli
+from sa_daemon.cli import verbs
 from sa_daemon.config import Config, ConfigError, config_from_dict
 from sa_daemon.io import keygen
 from sa_daemon.io.client import request, subscribe
@@ -42,7 +43,6 @@ from sa_daemon.io.security import (
     server_curve,
 )
 from sa_daemon.io.server import ZmqServer
-from sa_daemon.runtime import verbs
 
 CLI = [sys.executable, "-m", "sa_daemon.cli"]
 START_TIMEOUT_S = 60.0

@@ -12,7 +12,7 @@ from typing import Any
 from ..arm.backends import BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
 from ..planner.scene import builtin_scene_names
-from .launch import DEFAULT_SCENE, DEFAULT_TASK, Launch
+from ..runtime.launch import DEFAULT_SCENE, DEFAULT_TASK, Launch
 
 
 def override(cfg: Config, updates: dict[str, Any]) -> Config:
@@ -56,13 +56,13 @@ def launch_of(args: argparse.Namespace, exit_when_done: bool | None = None) -> L
 
 def build_daemon(args: argparse.Namespace) -> Any:
     """The :class:`~.daemon.Daemon` that ``run`` would start (built by the composition root, ``launch.py``)."""
-    from .launch import build_daemon as build
+    from ..runtime.launch import build_daemon as build
 
     return build(run_config(args), launch_of(args))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .rate import new_event_loop
+    from ..runtime.rate import new_event_loop
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     daemon = build_daemon(args)
@@ -132,8 +132,8 @@ def cmd_keygen(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
+    from ..runtime.replay import recording_to_trial
     from ..sim.plots import plot_timeline
-    from .replay import recording_to_trial
 
     trial = recording_to_trial(args.recording)
     out = Path(args.out) if args.out else Path(args.recording).with_suffix(".png")

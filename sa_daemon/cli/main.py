@@ -1,4 +1,5 @@
-"""The ``sa-daemon`` command line."""
+"""The ``sa-daemon`` command line: the parser, ``main``, and the verbs that are not the daemon's
+(``eval``, ``bench planner``, ``bench voice``, ``hear``, ``scenes``); ``verbs.py`` holds the daemon's."""
 
 from __future__ import annotations
 
@@ -7,12 +8,12 @@ import os
 import sys
 from pathlib import Path
 
-from .arm.backends import SIMULATED_BACKENDS
-from .config import METHODS, Config, ConfigError, load_config
-from .extras import MissingExtra
-from .planner.goals import parse_target
-from .planner.scene import SceneError, builtin_scene_names, load_scene
-from .runtime import verbs
+from ..arm.backends import SIMULATED_BACKENDS
+from ..config import METHODS, Config, ConfigError, load_config
+from ..extras import MissingExtra
+from ..planner.goals import parse_target
+from ..planner.scene import SceneError, builtin_scene_names, load_scene
+from . import verbs
 
 
 def _scene_arg(args: argparse.Namespace) -> str:
@@ -26,7 +27,7 @@ def _add_scene(p: argparse.ArgumentParser, required: bool = True) -> None:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from .sim.evaluate import (
+    from ..sim.evaluate import (
         TrialSpec,
         format_summary,
         run_trials,
@@ -47,7 +48,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     summary = summarise(trials)
     print(format_summary(summary))
     if plots is not None:
-        from .sim.plots import plot_summary_bars
+        from ..sim.plots import plot_summary_bars
 
         bars = plot_summary_bars(summary, plots / f"summary_{scene.name.replace(' ', '-')}.png", title=scene.name)
         print(f"wrote {len(trials)} timelines and {bars} to {plots}")
@@ -60,7 +61,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_planner(args: argparse.Namespace) -> int:
-    from .bench.planner import format_table, run_planner_bench, write_json
+    from ..bench.planner import format_table, run_planner_bench, write_json
 
     cfg = load_config(args.config)
     r = run_planner_bench(load_scene(_scene_arg(args)), cfg, args.samples, args.budget, peer=not args.no_peer)
@@ -74,7 +75,7 @@ def cmd_bench_planner(args: argparse.Namespace) -> int:
 def _voice_args(args: argparse.Namespace) -> tuple[Config, float]:
     """The voice extra present (else one line naming it), the config, and ``--min-confidence`` over
     ``voice.min_confidence``."""
-    from .extras import require
+    from ..extras import require
 
     require("pocketsphinx", "voice")
     cfg = load_config(args.config)
@@ -82,7 +83,7 @@ def _voice_args(args: argparse.Namespace) -> tuple[Config, float]:
 
 
 def cmd_bench_voice(args: argparse.Namespace) -> int:
-    from .bench.voice import format_table, run_voice_bench, write_json
+    from ..bench.voice import format_table, run_voice_bench, write_json
 
     _, threshold = _voice_args(args)
     r = run_voice_bench(threshold, jobs=args.jobs)
@@ -96,8 +97,8 @@ def cmd_bench_voice(args: argparse.Namespace) -> int:
 def cmd_hear(args: argparse.Namespace) -> int:
     """One word (yes, no or none) for a WAV file, with the confidence: the recogniser on your voice."""
     cfg, threshold = _voice_args(args)
-    from .speech.audio import answer_in, wav_to_16k
-    from .speech.recogniser import YesNoRecogniser
+    from ..speech.audio import answer_in, wav_to_16k
+    from ..speech.recogniser import YesNoRecogniser
 
     word, conf, heard = answer_in(wav_to_16k(args.wav), YesNoRecogniser(), threshold, cfg.voice.max_segment_s)
     print(f"{word} {conf:.2f}")
@@ -184,6 +185,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sa-daemon: error: {msg}", file=sys.stderr)
         return 2
 
-
-if __name__ == "__main__":
-    sys.exit(main())
