@@ -66,8 +66,8 @@ def run_daemon(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscr
 
     daemon = build_daemon(cfg, launch)
     run = BenchRun(daemon, 0.0)
-    n_read, n_stalled = subscribers, stalled_subscribers
-    swarm = SubscriberSwarm(daemon.opts.pub, n_read, n_stalled) if n_read or n_stalled else None
+    swarm = (SubscriberSwarm(daemon.opts.pub, subscribers, stalled_subscribers)
+             if subscribers or stalled_subscribers else None)
 
     async def sample() -> None:
         while True:

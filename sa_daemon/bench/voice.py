@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config import VoiceConfig
 from ..speech import espeak
 from ..speech.audio import answer_in
 from ..speech.recogniser import SAMPLE_RATE, YesNoRecogniser, to_16k
@@ -43,7 +44,6 @@ ANSWER_RATES = (130, 175)
 OTHER_VOICES = VOICES[:4]
 OTHER_RATE = 160
 NOISY_SNR_DB = 10.0
-MAX_SEGMENT_S = 4.0  # voice.max_segment_s's default
 
 
 def _add_noise(x: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarray:
@@ -120,7 +120,7 @@ def _classify(pcm: np.ndarray) -> dict[str, Any]:
     global _recogniser
     if _recogniser is None:
         _recogniser = YesNoRecogniser()
-    answer, confidence, heard = answer_in(pcm, _recogniser, 0.0, MAX_SEGMENT_S)
+    answer, confidence, heard = answer_in(pcm, _recogniser, 0.0, VoiceConfig().max_segment_s)
     return {"answer": answer, "confidence": confidence, "segments": len(heard),
             "words": " | ".join(h.words for h in heard), "check": " | ".join(h.check for h in heard),
             "decode_s": sum(h.decode_s for h in heard)}

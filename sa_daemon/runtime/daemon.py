@@ -48,7 +48,14 @@ from ..planner.model import Command, SharedAutonomyModel
 from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.worker import PlannerWorker, PlanReply, WorkerStatus
-from ..speech.speaker import Speaker, Spoken, echo_text, question_text
+from ..speech.speaker import (
+    PLAYER,
+    PLAYER_PACKAGE,
+    Speaker,
+    Spoken,
+    echo_text,
+    question_text,
+)
 from . import messages
 from .console import Console
 from .rate import FixedRate, Ring
@@ -731,7 +738,7 @@ class Daemon:
                 self.event("speech_unavailable", error=self.speaker.error)
             elif self.speaker.player_missing is not None:
                 log.warning("%s", self.speaker.player_missing)
-                self.event("speech_player_missing", player="aplay", package="alsa-utils",
+                self.event("speech_player_missing", player=PLAYER, package=PLAYER_PACKAGE,
                            detail=self.speaker.player_missing)
         deadline = time.monotonic() + self.cfg.runtime.worker_start_timeout_s
         while self.voice is not None and not self.voice.ready and self.voice.error is None \

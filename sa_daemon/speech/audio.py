@@ -103,8 +103,7 @@ def open_source(spec: str, device: str = "default") -> AudioSource:
             src.description = f"pcm {path}"
             return src
         if kind == "wav":
-            x, rate = read_wav(path)
-            return ArraySource(to_16k(x, rate), f"wav {path}")
+            return ArraySource(wav_to_16k(path), f"wav {path}")
     except (OSError, ValueError) as e:
         raise OSError(f"voice.source {spec}: {e}") from None
     raise ValueError(f"voice.source must be alsa, pcm:PATH or wav:PATH, not {spec!r}")
@@ -134,12 +133,13 @@ class UtteranceCutter:
         self.frame_bytes = int(self._ep.frame_bytes)
         self._pending = b""
         self._speech: list[bytes] = []
+        self._speech_bytes = 0
         self._t_start = 0.0
         self._max_bytes = int(max_s * SAMPLE_RATE) * 2
 
     def _close(self, now: float) -> Utterance:
         pcm = np.frombuffer(b"".join(self._speech), dtype="<i2").copy()
-        self._speech = []
+        self._speech, self._speech_bytes = [], 0
         return Utterance(pcm, self._t_start, now)
 
     def feed(self, data: bytes, now: float | None = None) -> list[Utterance]:
@@ -157,14 +157,15 @@ class UtteranceCutter:
             if not was:
                 self._t_start = now
             self._speech.append(bytes(speech))
-            if not self._ep.in_speech or sum(map(len, self._speech)) >= self._max_bytes:
+            self._speech_bytes += len(speech)
+            if not self._ep.in_speech or self._speech_bytes >= self._max_bytes:
                 out.append(self._close(now))
         return out
 
     def end(self, now: float | None = None) -> list[Utterance]:
         """The stream ended: the utterance still open, if any (padded with silence to close it)."""
         now = time.monotonic() if now is None else now
-        out = self.feed(bytes(self.frame_bytes * int(1.0 * SAMPLE_RATE * 2 / self.frame_bytes)), now)
+        out = self.feed(bytes(2 * SAMPLE_RATE), now)  # 1 s of silence
         if self._speech:
             out.append(self._close(now))
         return out

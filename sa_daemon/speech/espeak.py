@@ -65,8 +65,8 @@ def _version(lib: ctypes.CDLL) -> str:
     return v.decode() if v else "unknown"
 
 
-def _path_of(lib: ctypes.CDLL, fallback: str) -> str:
-    """The file the loader mapped for ``lib`` (from ``/proc/self/maps``), else ``fallback``."""
+def _mapped_path(fallback: str) -> str:
+    """The espeak-ng file the loader mapped into this process (from ``/proc/self/maps``), else ``fallback``."""
     with contextlib.suppress(OSError):
         for line in Path("/proc/self/maps").read_text().splitlines():
             if "libespeak-ng" in line and "/" in line:
@@ -76,7 +76,7 @@ def _path_of(lib: ctypes.CDLL, fallback: str) -> str:
 
 def _system() -> EspeakLibrary:
     lib = ctypes.CDLL(SONAME, mode=ctypes.RTLD_GLOBAL)
-    return EspeakLibrary("system", _path_of(lib, SONAME), _version(lib), None)
+    return EspeakLibrary("system", _mapped_path(SONAME), _version(lib), None)
 
 
 def _wheel() -> EspeakLibrary:

@@ -30,7 +30,7 @@ CHUNK_BYTES = 3200  # 0.1 s of 16 kHz int16
 def _listener_main(conn: Connection, cfg_data: dict) -> None:
     """Entry point of the voice process."""
     from .audio import UtteranceCutter, open_source
-    from .recogniser import YesNoRecogniser
+    from .recogniser import Heard, YesNoRecogniser
 
     cfg = VoiceConfig.model_validate(cfg_data)
     try:
@@ -71,10 +71,9 @@ def _listener_main(conn: Connection, cfg_data: dict) -> None:
                     w = window[0]
                 if w is None or u.t_start < w[1] or u.t_start > w[2]:
                     continue  # no question pending, or the robot's own speech
-                if u.seconds > cfg.max_segment_s:
-                    conn.send(("heard", w[0], {"answer": "none", "confidence": 0.0, "words": "", "check": "",
-                                               "seconds": round(u.seconds, 3), "decode_s": 0.0,
-                                               "reason": "too long for an answer"}, u.t_start, u.t_end))
+                if u.seconds > cfg.max_segment_s:  # not decoded
+                    heard = {**Heard("none", 0.0, "", "", u.seconds, 0.0).as_dict(), "reason": "too long for an answer"}
+                    conn.send(("heard", w[0], heard, u.t_start, u.t_end))
                     continue
                 conn.send(("heard", w[0], recogniser.recognise(u.pcm).as_dict(), u.t_start, u.t_end))
     except (OSError, BrokenPipeError) as e:

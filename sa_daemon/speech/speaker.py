@@ -39,17 +39,21 @@ from . import espeak
 log = logging.getLogger(__name__)
 
 
-def question_text(target: str) -> str:
-    """``"cup:top"`` -> ``"Is the cup with top grasp your goal?"`` (underscores read as spaces)."""
+def _spoken_target(target: str) -> tuple[str, str]:
+    """``"meat can:side_horizontal"`` -> ``("meat can", "side horizontal")`` (underscores read as spaces)."""
     obj, _, grasp = target.partition(":")
-    grasp = grasp.replace("_", " ").strip()
+    return obj, grasp.replace("_", " ").strip()
+
+
+def question_text(target: str) -> str:
+    """``"cup:top"`` -> ``"Is the cup with top grasp your goal?"``."""
+    obj, grasp = _spoken_target(target)
     return f"Is the {obj} with {grasp} grasp your goal?" if grasp else f"Is the {obj} your goal?"
 
 
 def echo_text(yes: bool, target: str) -> str:
     """What the robot says back after a spoken answer: ``"Yes: the cup, top grasp"``."""
-    obj, _, grasp = target.partition(":")
-    grasp = grasp.replace("_", " ").strip()
+    obj, grasp = _spoken_target(target)
     return f"{'Yes' if yes else 'No'}: the {obj}" + (f", {grasp} grasp" if grasp else "")
 
 
