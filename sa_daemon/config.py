@@ -24,7 +24,7 @@ from pydantic import (
 
 # The one registry of arm backends and the one list of methods; neither imports the package at load time.
 from .arm.backends import BACKENDS
-from .planner.methods import METHODS
+from .model.methods import METHODS
 
 PositiveFloat = float
 

@@ -8,8 +8,8 @@ import pytest
 
 from sa_daemon.config import Config
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.goals import Goal, GraspType
-from sa_daemon.planner.goalset import GoalSet
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.goalset import GoalSet
 
 TOP_RPY = (math.pi, 0.0, 0.0)
 SIDE_RPY = (math.pi, -math.pi / 2, 0.0)

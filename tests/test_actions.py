@@ -9,21 +9,12 @@ import pytest
 
 from sa_daemon.config import BlendConfig, Config, HOConfig, IntentConfig, MoveConfig
 from sa_daemon.geometry import Pose, quat_mul, rotvec_to_quat
-from sa_daemon.planner.actions import (
-    HO_ACTION,
-    NO_ASSIST,
-    Action,
-    ActionKind,
-    Mode,
-    blend,
-    ho_twist,
-    mask_to_mode,
-    move_twist,
-)
-from sa_daemon.planner.goals import Goal, GraspType
-from sa_daemon.planner.goalset import GoalSet
-from sa_daemon.planner.huber import goal_gradients
-from sa_daemon.planner.model import SharedAutonomyModel
+from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
+from sa_daemon.model.huber import goal_gradients
+from sa_daemon.model.model import SharedAutonomyModel
+from sa_daemon.model.twists import blend, ho_twist, mask_to_mode, move_twist
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.goalset import GoalSet
 
 MOVE = MoveConfig()
 INTENT = IntentConfig()

@@ -13,7 +13,7 @@ from sa_daemon.arm.backends import BACKENDS, JOINTED_BACKENDS, SIMULATED_BACKEND
 from sa_daemon.arm.factory import make_arm
 from sa_daemon.cli import build_parser
 from sa_daemon.config import ConfigError, config_from_dict
-from sa_daemon.planner.scene import load_scene
+from sa_daemon.world.scene import load_scene
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

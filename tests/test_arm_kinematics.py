@@ -18,7 +18,7 @@ from sa_daemon.arm.kinematics import (
     start_configuration,
 )
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.scene import load_scene
+from sa_daemon.world.scene import load_scene
 
 # The published table (docs/arm.md): joint origin xyz (m) and rpy (rad) in the parent link, every joint
 # about its local z; the TCP 0.172 m along the flange z.

@@ -13,10 +13,10 @@ import pytest
 
 from sa_daemon.config import Config, IntentConfig
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.belief import Belief, cap_probabilities
-from sa_daemon.planner.goals import Goal, GraspType
-from sa_daemon.planner.goalset import GoalSet
-from sa_daemon.planner.huber import huber_slope, huber_value, q_minus_v
+from sa_daemon.model.belief import Belief, cap_probabilities
+from sa_daemon.model.huber import huber_slope, huber_value, q_minus_v
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
 GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
@@ -415,7 +415,7 @@ def test_paper_fig2_example():
 
 
 def test_model_update_input_resamples_when_due():
-    from sa_daemon.planner.model import SharedAutonomyModel
+    from sa_daemon.model.model import SharedAutonomyModel
 
     model = SharedAutonomyModel(Config())
     b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))

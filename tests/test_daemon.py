@@ -22,12 +22,12 @@ import pytest
 import zmq
 from helpers import CLI, START_TIMEOUT_S, DaemonProc, free_port, process_gone, wav_stats
 
-from sa_daemon.arm.safety import SafetyCode
 from sa_daemon.config import Config
+from sa_daemon.control.safety import SafetyCode
 from sa_daemon.io.client import request
 from sa_daemon.io.recorder import read_recording
-from sa_daemon.planner.scene import load_scene
 from sa_daemon.runtime.replay import recording_to_trial
+from sa_daemon.world.scene import load_scene
 
 SCENE1_TARGETS = load_scene("scene1").targets
 STATE_KEYS = {

@@ -11,7 +11,6 @@ from helpers import SUMMARY_KEYS, TRIAL_KEYS
 
 from sa_daemon.arm.kinematic import KinematicArm
 from sa_daemon.config import Config, config_from_dict
-from sa_daemon.planner.scene import load_scene
 from sa_daemon.sim.episode import TrialResult, run_trial
 from sa_daemon.sim.evaluate import (
     TrialSpec,
@@ -20,6 +19,7 @@ from sa_daemon.sim.evaluate import (
     summarise,
     write_results,
 )
+from sa_daemon.world.scene import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -613,7 +613,7 @@ def test_bad_scene_file_exits_2_naming_the_key_and_starts_nothing(tmp_path, name
     assert SCENE.count(old) == 1
     good = tmp_path / "good.toml"
     good.write_text(SCENE)
-    from sa_daemon.planner.scene import load_scene
+    from sa_daemon.world.scene import load_scene
 
     assert load_scene(good).targets == ["cup:top", "cup:side"]  # the unmodified scene is valid
     (tmp_path / "bad.toml").write_text(SCENE.replace(old, new))

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sa_daemon.geometry import Pose, quat_angle
-from sa_daemon.planner.goals import GraspType as G
-from sa_daemon.planner.grasps import (
+from sa_daemon.world.goals import GraspType as G
+from sa_daemon.world.grasps import (
     GRIPPER_MAX_OPENING_M,
     GraspInfeasibleError,
     UnreachableGraspError,

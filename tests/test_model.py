@@ -9,10 +9,10 @@ import pytest
 
 from sa_daemon.config import Config, config_from_dict
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.actions import HO_ACTION, NO_ASSIST, Action, ActionKind
-from sa_daemon.planner.goalset import GoalSet
-from sa_daemon.planner.methods import method_spec
-from sa_daemon.planner.model import SharedAutonomyModel
+from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind
+from sa_daemon.model.methods import method_spec
+from sa_daemon.model.model import SharedAutonomyModel
+from sa_daemon.world.goalset import GoalSet
 
 
 def model_with(**planner) -> SharedAutonomyModel:

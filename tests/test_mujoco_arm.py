@@ -19,8 +19,9 @@ from sa_daemon.arm.factory import make_arm
 from sa_daemon.arm.kinematics import ArmKinematics
 from sa_daemon.arm.mujoco_arm import MujocoArm
 from sa_daemon.config import Config
-from sa_daemon.planner.scene import load_scene
+from sa_daemon.control.safety import SafetyCode, SafetyPipeline
 from sa_daemon.sim.episode import arm_factory, run_trial
+from sa_daemon.world.scene import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -164,7 +165,7 @@ def test_step_keeps_simulated_time_on_the_callers_clock(arm):
 # -- gripper -------------------------------------------------------------------------------------------
 
 
-def test_gripper_closes_on_the_cup_at_a_side_grasp_stops_the_arm_and_lifts_it(scene1):
+def test_gripper_closes_on_the_cup_at_a_side_grasp_the_pipeline_holds_the_arm_and_it_lifts(scene1):
     cfg = Config()
     goal = scene1.goal("cup:side")
     arm = MujocoArm(scene1, cfg)
@@ -174,8 +175,15 @@ def test_gripper_closes_on_the_cup_at_a_side_grasp_stops_the_arm_and_lifts_it(sc
     arm.step(0.1)
     p0 = arm.read().pose
     arm.command_gripper(True)
-    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))  # ignored: a closed gripper stops the arm
-    arm.step(0.6)
+    # A closed gripper stops the arm through the safety pipeline's stage 5 (the arm itself carries what
+    # it holds, as the xArm does): the twist asked for becomes zero before it reaches the arm.
+    safety = SafetyPipeline(cfg.safety, cfg.limits, 0.1, arm.kinematics)
+    for _ in range(6):
+        s = arm.read()
+        out = safety.filter(np.array([0.05, 0, 0, 0, 0, 0]), s.pose, joints=s.joints, gripper_closed=s.gripper_closed)
+        assert out.status is SafetyCode.GRIPPER
+        arm.command_twist(out.twist)
+        arm.step(0.1)
     assert arm.read().gripper_closed is True
     fingers = arm.fingers
     assert np.all(fingers < 0.0425 - 1e-3)  # moved in ...
@@ -233,7 +241,7 @@ def test_offscreen_render_writes_png_frames(tmp_path):
     code = textwrap.dedent(f"""
         from sa_daemon.arm.mujoco_arm import MujocoArm
         from sa_daemon.arm.mujoco_render import read_png_size
-        from sa_daemon.planner.scene import load_scene
+        from sa_daemon.world.scene import load_scene
         arm = MujocoArm(load_scene("scene1"))
         try:
             a = arm.render({str(tmp_path / "one.png")!r}, 320, 240)

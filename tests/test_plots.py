@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import Config
-from sa_daemon.planner.scene import load_scene
 from sa_daemon.sim.episode import TrialResult, run_trial
 from sa_daemon.sim.evaluate import summarise
 from sa_daemon.sim.plots import plot_summary_bars, plot_timeline
+from sa_daemon.world.scene import load_scene
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

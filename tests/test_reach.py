@@ -12,8 +12,8 @@ from sa_daemon.arm.kinematics import ArmKinematics, start_configuration
 from sa_daemon.arm.reach import reachable_scene, reaches
 from sa_daemon.cli import verbs
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.goals import Goal, GraspType
-from sa_daemon.planner.scene import load_scene
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.scene import load_scene
 
 MARGIN = 0.1
 
@@ -72,4 +72,4 @@ def test_the_daemon_plans_over_the_goals_its_arm_reaches(arm, filtered):
     daemon = verbs.build_daemon(args)
     poses = len(daemon.opts.scene.goal("drill:side_horizontal").poses)
     assert poses == (2 if filtered else 4)
-    assert np.isclose(sum(daemon.belief.probs), 1.0)
+    assert np.isclose(sum(daemon.ctl.belief.probs), 1.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import RewardConfig
-from sa_daemon.planner.reward import (
+from sa_daemon.model.reward import (
     distance_reward,
     opposes,
     opposition_reward,

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sa_daemon.arm.safety import SafetyCode, SafetyPipeline, SafetyResult
 from sa_daemon.config import LimitsConfig, SafetyConfig
+from sa_daemon.control.safety import SafetyCode, SafetyPipeline, SafetyResult
 from sa_daemon.geometry import Pose
 
 CFG = SafetyConfig()
@@ -340,7 +340,7 @@ def test_a_user_rotating_at_the_wrist_singularity_gets_through_it():
     speeds far below the arm's limits."""
     from sa_daemon.arm.kinematics import ArmKinematics
     from sa_daemon.arm.reach import reachable_scene
-    from sa_daemon.planner.scene import load_scene
+    from sa_daemon.world.scene import load_scene
 
     kin = ArmKinematics()
     scene = reachable_scene(load_scene("scene1"), kin, CFG.joint_margin_rad)

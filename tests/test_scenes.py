@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sa_daemon.planner.goals import GraspType as G
-from sa_daemon.planner.grasps import classify_grasp, grasp_pose, is_reachable
-from sa_daemon.planner.scene import (
+from sa_daemon.world.goals import GraspType as G
+from sa_daemon.world.grasps import classify_grasp, grasp_pose, is_reachable
+from sa_daemon.world.scene import (
     Scene,
     SceneError,
     SceneObject,

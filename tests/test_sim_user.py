@@ -9,7 +9,7 @@ import pytest
 
 from sa_daemon.config import InputConfig, SimUserConfig
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.actions import Mode
+from sa_daemon.model.actions import Mode
 from sa_daemon.sim.user import SimulatedUser, UserInput
 
 TOP = (math.pi, 0.0, 0.0)  # tool z (approach) points straight down

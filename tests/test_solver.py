@@ -21,15 +21,16 @@ from sa_daemon.geometry import (
     rotvec_to_quat,
     rpy_to_quat,
 )
-from sa_daemon.planner.actions import ActionKind, blend, ho_twist, move_twist
-from sa_daemon.planner.goals import Goal, GraspType
-from sa_daemon.planner.goalset import GoalSet
-from sa_daemon.planner.huber import goal_gradients
-from sa_daemon.planner.model import SharedAutonomyModel
+from sa_daemon.model.actions import ActionKind
+from sa_daemon.model.huber import goal_gradients
+from sa_daemon.model.model import SharedAutonomyModel
+from sa_daemon.model.reward import distance_reward, opposes
+from sa_daemon.model.twists import blend, ho_twist, move_twist
 from sa_daemon.planner.problem import Problem
-from sa_daemon.planner.reward import distance_reward, opposes
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
 

@@ -12,11 +12,11 @@ import pytest
 from helpers import process_gone
 
 from sa_daemon.config import Config
-from sa_daemon.planner.actions import ActionKind, Mode
-from sa_daemon.planner.model import SharedAutonomyModel
-from sa_daemon.planner.scene import load_scene
+from sa_daemon.model.actions import ActionKind, Mode
+from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.planner.snapshot import PlanResult, Snapshot
 from sa_daemon.planner.worker import PlannerWorker, PlanReply
+from sa_daemon.world.scene import load_scene
 
 START_TIMEOUT_S = 60.0  # a spawned interpreter importing numpy/scipy on a loaded 2-core machine
 

@@ -152,7 +152,7 @@ def test_old_firmware_is_a_fault(fake):
 
 def test_sdk_fake_uses_the_fake_through_the_factory():
     from sa_daemon.arm.factory import make_arm
-    from sa_daemon.planner.scene import load_scene
+    from sa_daemon.world.scene import load_scene
 
     arm = make_arm("xarm", load_scene("scene1"), make_cfg())
     try:

@@ -22,8 +22,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
 from sa_daemon.geometry import Pose
-from sa_daemon.planner.grasps import SHOULDER_M, grasp_pose, wrist_point
-from sa_daemon.planner.scene import Scene, SceneObject, load_scene
+from sa_daemon.world.grasps import SHOULDER_M, grasp_pose, wrist_point
+from sa_daemon.world.scene import Scene, SceneObject, load_scene
 
 ARROW_M = 0.05  # drawn length of an approach arrow
 TICK_M = 0.012  # half-length of a closing-axis tick

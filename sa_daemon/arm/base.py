@@ -17,7 +17,7 @@ from ..geometry import FloatArray, Pose
 
 if TYPE_CHECKING:
     from ..config import Config
-    from ..planner.scene import Scene
+    from ..world.scene import Scene
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from .backends import backend
 
 if TYPE_CHECKING:
     from ..config import Config
-    from ..planner.scene import Scene
+    from ..world.scene import Scene
     from .base import Arm
 
 

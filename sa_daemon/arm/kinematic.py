@@ -12,7 +12,7 @@ from .base import Arm, ArmState, limit_twist
 
 if TYPE_CHECKING:
     from ..config import Config
-    from ..planner.scene import Scene
+    from ..world.scene import Scene
 
 
 class KinematicArm(Arm):
@@ -48,10 +48,9 @@ class KinematicArm(Arm):
         self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps)
 
     def command_gripper(self, closed: bool) -> None:
+        """Open or close the gripper (instantly). Motion is not gated here: like the xArm, the arm moves
+        whatever it holds; holding it still while the gripper is closed is the safety pipeline's stage."""
         self._closed = bool(closed)
-        if self._closed:
-            self._twist = np.zeros(6)
 
     def step(self, dt: float) -> None:
-        if not self._closed:
-            self._pos, self._quat = integrate_pose(self._pos, self._quat, self._twist, dt)
+        self._pos, self._quat = integrate_pose(self._pos, self._quat, self._twist, dt)

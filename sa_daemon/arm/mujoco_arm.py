@@ -10,8 +10,9 @@ compensated by MuJoCo's ``gravcomp``. Solving at ``q_ref`` (which the measured `
 every substep (not once per ``step`` call) keeps long calls such as ``step(1.0)`` exact. The reference is
 kept within ``MAX_LAG_RAD`` of the measured joints, so an arm blocked by contact does not wind up.
 
-Gripper. ``command_gripper(True)`` drives both fingers (coupled, position servo, at most 40 N) closed
-and stops the arm; a later ``command_twist`` is ignored until the gripper opens again.
+Gripper. ``command_gripper(True)`` drives both fingers (coupled, position servo, at most 40 N) closed.
+The arm keeps obeying ``command_twist`` (it carries what it holds, as the xArm does); the safety
+pipeline holds it still while the gripper is closed.
 :meth:`MujocoArm.lift_test` then lifts the TCP and reports which object rose with it.
 
 Headless by default. With ``viewer`` a passive viewer window follows the simulation if a display
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..config import Config
 from ..geometry import FloatArray, Pose
-from ..planner.scene import Scene
+from ..world.scene import Scene
 from .base import Arm, ArmState, limit_twist
 from .kinematics import (
     ARM_JOINTS,
@@ -140,14 +141,14 @@ class MujocoArm(Arm):
         t = np.asarray(twist, dtype=float)
         if t.shape != (6,) or not np.all(np.isfinite(t)):
             raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        self._twist = np.zeros(6) if self._closed else limit_twist(t, self._limits.linear_mps, self._limits.angular_radps)
+        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps)
 
     def command_gripper(self, closed: bool) -> None:
-        """Close (``True``: fingers driven shut, arm stopped) or open the gripper."""
+        """Close (``True``: fingers driven shut) or open the gripper. Motion is not gated here: like the
+        xArm, the arm carries what it holds; holding it still while the gripper is closed is the safety
+        pipeline's stage (``gripper_closed``)."""
         self._closed = bool(closed)
         self.data.ctrl[self._grip_act] = FINGER_CLOSED_CMD_M if self._closed else FINGER_OPEN_M
-        if self._closed:
-            self._twist = np.zeros(6)
 
     def step(self, dt: float) -> None:
         """Advance the simulation by ``dt`` s under the held twist.

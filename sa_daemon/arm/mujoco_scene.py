@@ -22,7 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from ..planner.scene import Scene, SceneObject
+from ..world.scene import Scene, SceneObject
 from .kinematics import model_path
 
 TABLE_X0_M = 0.12

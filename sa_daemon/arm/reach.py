@@ -1,6 +1,6 @@
 """Which grasp poses an arm with joints can really reach: inverse kinematics against the joint bounds.
 
-The scene loader's :func:`~sa_daemon.planner.grasps.is_reachable` is a sphere around the shoulder: right
+The scene loader's :func:`~sa_daemon.world.grasps.is_reachable` is a sphere around the shoulder: right
 for the gripper-only kinematic arm, too generous for the xArm-6, whose joint 5 stops at -1.69 rad. Some
 side grasps inside the sphere (head-on, close to the table) would need it beyond that bound; a user
 driving toward one ends at the joint margin (``joint_bound``) and never gets there. So for arms with
@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..geometry import FloatArray, Pose
-from ..planner.goals import Goal
-from ..planner.scene import Scene
+from ..world.goals import Goal
+from ..world.scene import Scene
 
 if TYPE_CHECKING:  # Pinocchio (about 50 MB resident) loads only for arms with joints
     from .kinematics import ArmKinematics

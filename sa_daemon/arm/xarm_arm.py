@@ -36,7 +36,7 @@ from ..geometry import FloatArray, Pose
 from .base import Arm, ArmState, Kinematics, limit_twist
 
 if TYPE_CHECKING:
-    from ..planner.scene import Scene
+    from ..world.scene import Scene
 
 log = logging.getLogger(__name__)
 

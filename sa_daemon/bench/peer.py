@@ -12,7 +12,7 @@ import random
 
 import pomdp_py
 
-from ..planner.actions import Action
+from ..model.actions import Action
 from ..planner.problem import Problem
 
 

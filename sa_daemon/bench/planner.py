@@ -25,13 +25,13 @@ import numpy as np
 from ..config import Config
 from ..extras import require
 from ..geometry import Pose
-from ..planner.belief import Belief
-from ..planner.model import SharedAutonomyModel
+from ..model.belief import Belief
+from ..model.model import SharedAutonomyModel
 from ..planner.problem import Problem
-from ..planner.scene import Scene
 from ..planner.snapshot import Snapshot
 from ..planner.solver import Solver
 from ..sim.episode import run_trial
+from ..world.scene import Scene
 
 
 def sample_snapshots(scene: Scene, cfg: Config, samples: int) -> list[Snapshot]:

@@ -11,8 +11,8 @@ from pathlib import Path
 from ..arm.backends import SIMULATED_BACKENDS
 from ..config import METHODS, Config, ConfigError, load_config
 from ..extras import MissingExtra
-from ..planner.goals import parse_target
-from ..planner.scene import SceneError, builtin_scene_names, load_scene
+from ..world.goals import parse_target
+from ..world.scene import SceneError, builtin_scene_names, load_scene
 from . import verbs
 
 

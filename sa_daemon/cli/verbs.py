@@ -11,8 +11,8 @@ from typing import Any
 
 from ..arm.backends import BACKENDS
 from ..config import METHODS, Config, config_from_dict, load_config
-from ..planner.scene import builtin_scene_names
 from ..runtime.launch import DEFAULT_SCENE, DEFAULT_TASK, Launch
+from ..world.scene import builtin_scene_names
 
 
 def override(cfg: Config, updates: dict[str, Any]) -> Config:

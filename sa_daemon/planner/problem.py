@@ -25,10 +25,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import FloatArray, integrate_pose, quat_angle
-from .actions import Action, ActionKind, blend, ho_twist, move_twist
-from .huber import goal_gradients
-from .model import SharedAutonomyModel
-from .reward import distance_reward, opposes, opposition_reward
+from ..model.actions import Action, ActionKind
+from ..model.huber import goal_gradients
+from ..model.model import SharedAutonomyModel
+from ..model.reward import distance_reward, opposes, opposition_reward
+from ..model.twists import blend, ho_twist, move_twist
 from .snapshot import Snapshot
 
 

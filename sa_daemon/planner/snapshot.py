@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import FloatArray, Pose
-from .actions import Action, ActionKind, Mode
-from .goals import Goal
-from .goalset import GoalSet
+from ..model.actions import Action, ActionKind, Mode
+from ..world.goals import Goal
+from ..world.goalset import GoalSet
 
 
 @dataclass(frozen=True, eq=False)

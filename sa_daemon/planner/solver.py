@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import FloatArray
-from .actions import Action
-from .methods import method_spec
-from .model import SharedAutonomyModel
+from ..model.actions import Action
+from ..model.methods import method_spec
+from ..model.model import SharedAutonomyModel
 from .problem import Problem
 from .snapshot import PlanResult, Snapshot
 

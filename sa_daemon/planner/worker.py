@@ -38,7 +38,7 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
     import os
 
     from ..config import config_from_dict
-    from .model import SharedAutonomyModel
+    from ..model.model import SharedAutonomyModel
     from .solver import Solver
 
     cfg = config_from_dict(cfg_data, "planner worker")
@@ -72,10 +72,12 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
 
 @dataclass
 class PlanReply:
-    """A plan received from the worker: request ``seq``, the result, solve time (ms) and the
-    round-trip time (request to receipt, ms)."""
+    """A plan received from the worker: request ``seq``, the snapshot it was computed on (its goal set is
+    the one the result's move indexes), the result, solve time (ms) and the round-trip time (request to
+    receipt, ms)."""
 
     seq: int
+    snapshot: Snapshot
     result: PlanResult
     solve_ms: float
     round_trip_ms: float
@@ -104,7 +106,7 @@ class PlannerWorker:
         self.restarts = 0
         self.started_at = 0.0
         self._seq = 0
-        self.in_flight: tuple[int, float] | None = None  # (seq, sent at, time.monotonic s)
+        self.in_flight: tuple[int, float, Snapshot] | None = None  # (seq, sent at time.monotonic s, snapshot)
 
     # -- lifecycle -------------------------------------------------------------------------------------
 
@@ -167,7 +169,7 @@ class PlannerWorker:
             self._conn.send((self._seq, snap))
         except (OSError, BrokenPipeError):
             return False
-        self.in_flight = (self._seq, sent)
+        self.in_flight = (self._seq, sent, snap)
         return True
 
     def _readable(self) -> None:
@@ -189,9 +191,9 @@ class PlannerWorker:
         seq = msg[1]
         if self.in_flight is None or seq != self.in_flight[0]:
             return  # an answer to a request given up on
-        sent = self.in_flight[1]
+        _, sent, snap = self.in_flight
         self.in_flight = None
         if msg[0] == "plan":
-            self._on_reply(PlanReply(seq, msg[2], float(msg[3]), (time.monotonic() - sent) * 1e3))
+            self._on_reply(PlanReply(seq, snap, msg[2], float(msg[3]), (time.monotonic() - sent) * 1e3))
         else:
             self._on_reply(f"plan failed: {msg[2]}")

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 from ..arm.backends import backend
 from ..config import Config
-from ..planner.scene import load_scene
-from .daemon import Daemon, RunOptions
+from ..world.scene import load_scene
+from .daemon import Daemon
+from .options import RunOptions
 
 DEFAULT_SCENE = "scene1"
 DEFAULT_TASK = "cup:top"  # the paper's task 1

@@ -38,6 +38,8 @@ def recording_to_trial(path: str | Path) -> TrialResult:
         tl.opposed.append(bool(msg.get("opposed", False)))
         tl.user_twist.append(list(msg["user_twist"]))
         tl.robot_twist.append(list(msg["robot_twist"]))
+        tl.command_twist.append(list(msg["command_twist"]))
+        tl.safety.append(str(msg.get("safety", "ok")))
         tl.mode.append(str(msg["mode"]))
     if not tl.t:
         raise ValueError(f"{path}: no recorded state")

@@ -14,10 +14,10 @@ import numpy as np
 
 from ..config import Config
 from ..geometry import Pose
-from ..planner.actions import Mode
-from ..planner.scene import Scene
+from ..model.actions import Mode
 from ..sim.episode import desired_pose
 from ..sim.user import SimulatedUser
+from ..world.scene import Scene
 
 
 @dataclass(frozen=True)

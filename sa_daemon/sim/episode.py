@@ -1,9 +1,11 @@
-"""One evaluation trial: simulated user, belief, planner and arm in simulated time.
+"""One evaluation trial: simulated user, the product's controller, planner and arm in simulated time.
 
 Each control step (``eval.control_hz``, 40 Hz = the paper's 0.025 s joystick sampling) the user acts on
-what it sees, the belief takes the joystick sample, every ``planner.period_s`` the planner picks an action
-(deterministically: it stops at ``eval.node_budget`` belief evaluations, never at a clock), the model turns
-the action into a blended twist and the arm moves. A question stops the robot until the user answers.
+what it sees (including whether the safety pipeline refused its last command, as the daemon tells it),
+the :class:`~..control.controller.Controller` takes the joystick sample and updates the belief, every
+``planner.period_s`` the planner picks an action (deterministically: it stops at ``eval.node_budget``
+belief evaluations, never at a clock), and the controller's tick - the blended twist through the same
+safety pipeline as ``sa-daemon run`` - moves the arm. A question stops the robot until the user answers.
 The trial ends when the user closes the gripper (success if it is at its desired pose, a pose of the
 task's goal) or at ``sim_user.timeout_s``. An arm with a physical check (``lift_test``, the MuJoCo arm)
 must also lift the task's object after closing for the trial to succeed.
@@ -22,13 +24,13 @@ from ..arm.factory import make_arm
 from ..arm.kinematic import KinematicArm
 from ..arm.reach import reachable_scene
 from ..config import Config
+from ..control.controller import Controller
 from ..geometry import Pose
-from ..planner.actions import NO_ASSIST, Action, ActionKind, Mode
-from ..planner.goals import Goal
-from ..planner.model import SharedAutonomyModel
-from ..planner.scene import Scene
+from ..model.actions import Mode
 from ..planner.snapshot import PlanResult, Snapshot
 from ..planner.solver import Solver
+from ..world.goals import Goal
+from ..world.scene import Scene
 from . import metrics
 from .user import SimulatedUser
 
@@ -54,6 +56,8 @@ class Timeline:
     opposed: list[bool] = field(default_factory=list)
     user_twist: list[list[float]] = field(default_factory=list)
     robot_twist: list[list[float]] = field(default_factory=list)
+    command_twist: list[list[float]] = field(default_factory=list)  # after the safety pipeline
+    safety: list[str] = field(default_factory=list)  # the pipeline's status (most severe code)
     mode: list[str] = field(default_factory=list)
 
 
@@ -108,21 +112,15 @@ def run_trial(
 ) -> TrialResult:
     """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``."""
     rng = np.random.default_rng(seed)
-    model = SharedAutonomyModel(cfg)
-    solver = Solver(model)
     arm = arm_factory(scene, cfg)
     if arm.kinematics is not None:  # an arm with joints: only the poses it can reach (arm/reach.py)
         scene = reachable_scene(scene, arm.kinematics, cfg.safety.joint_margin_rad)
     goal = scene.goal(task)
     dt = 1.0 / cfg.eval.control_hz
     user = SimulatedUser(task, desired_pose(goal, scene.start, cfg, rng, pose_choice), cfg.sim_user, cfg.input, rng, dt)
-    belief = model.initial_belief(scene.goals)
+    ctl = Controller(cfg, scene.goals, method, dt, arm.kinematics)
+    solver = Solver(ctl.model)
     plan_every = max(1, round(cfg.planner.period_s / dt))
-    asked: set[str] = set()
-    action: Action = NO_ASSIST
-    plan_goals = belief.goals
-    question: str | None = None
-    answer_at = 0.0
     n_steps = int(np.ceil(cfg.sim_user.timeout_s / dt))
     axes: list = []
     modes: list[str] = []
@@ -131,53 +129,49 @@ def run_trial(
     closed = False
     timeline = Timeline() if record else None
     targets = scene.targets
-    step = 0
     for step in range(n_steps):
         t = step * dt
-        pose = arm.read().pose
-        inp = user.act(pose, listening=question is not None)
+        state = arm.read()
+        inp = user.act(state.pose, listening=ctl.question is not None, blocked=ctl.last.refused)
         if inp.close:
             arm.command_gripper(True)
             closed = True
             break
-        u = inp.twist(cfg.input)
-        belief = model.update_input(belief, pose, u)
-        if question is not None and t >= answer_at:
-            belief = model.update_answer(belief, question, user.answer(question))
-            question = None  # the action is still the question: re-plan now
-        if question is None and (step % plan_every == 0 or action.kind is ActionKind.QUESTION):
-            snap = Snapshot(
-                belief.goals, belief.probs, pose, u, inp.mode, frozenset(asked), method,
-                budget_s=None, node_budget=cfg.eval.node_budget,
-            )
-            result = solver.plan(snap)
-            plans += 1
-            if on_plan is not None:
-                on_plan(snap, result)
-            action, plan_goals = result.action, belief.goals
-            if action.kind is ActionKind.QUESTION:
-                question = action.target
-                asked.add(question)
-                answer_at = t + cfg.sim_user.answer_delay_s
-        if plan_goals is not belief.goals:
-            action, plan_goals = model.remap_action(action, plan_goals, belief.goals, pose), belief.goals
-        cmd = model.command(action, belief.goals, belief.probs, pose, u, method)
+        ctl.set_mode(inp.mode)
+        ctl.on_input(inp.axes, t)
+        ctl.update_belief(state.pose, t)
+        answered = False
+        q = ctl.question
+        if q is not None and t - q.asked_at >= cfg.sim_user.answer_delay_s - 1e-9:
+            ctl.on_answer(user.answer(q.target), t)
+            answered = True  # re-plan now, with the answer
+        if step % plan_every == 0 or answered:
+            snap = ctl.snapshot(state.pose, budget_s=None, node_budget=cfg.eval.node_budget)
+            if snap is not None:
+                result = solver.plan(snap)
+                plans += 1
+                if on_plan is not None:
+                    on_plan(snap, result)
+                ctl.accept_plan(snap, result, t)
+        tick = ctl.tick(state, t)
         axes.append(inp.axes)
         modes.append(inp.mode.value)
-        opposed.append(cmd.opposed)
-        arm.command_twist(cmd.total_twist)
+        opposed.append(tick.command.opposed)
+        arm.command_twist(tick.safety.twist)
         arm.step(dt)
         if timeline is not None:
-            tp = belief.target_probabilities()
+            tp = ctl.belief.target_probabilities()
             timeline.t.append(t)
             timeline.belief.append([tp[x] for x in targets])
-            timeline.action.append(cmd.action.label)
-            timeline.opposed.append(cmd.opposed)
-            timeline.user_twist.append(u.tolist())
-            timeline.robot_twist.append(cmd.robot_twist.tolist())
+            timeline.action.append(tick.command.action.label)
+            timeline.opposed.append(tick.command.opposed)
+            timeline.user_twist.append(ctl.user_twist.tolist())
+            timeline.robot_twist.append(tick.command.robot_twist.tolist())
+            timeline.command_twist.append(tick.safety.twist.tolist())
+            timeline.safety.append(tick.safety.status.value)
             timeline.mode.append(inp.mode.value)
     elapsed = len(axes) * dt
-    final_p = belief.target_probabilities()[task]
+    final_p = ctl.belief.target_probabilities()[task]
     success = closed and user.at_goal(arm.read().pose)
     lift_test = getattr(arm, "lift_test", None)
     if success and callable(lift_test):
@@ -194,7 +188,7 @@ def run_trial(
         joystick_input=metrics.joystick_input(axes),
         opposing_pct=metrics.opposing_pct(opposed),
         correct_prediction=metrics.correct_prediction(final_p),
-        questions=len(asked),
+        questions=len(ctl.asked),
         final_target_p=final_p,
         plans=plans,
         targets=targets,

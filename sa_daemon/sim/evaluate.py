@@ -18,7 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..config import Config
-from ..planner.scene import load_scene
+from ..world.scene import load_scene
 from .episode import arm_factory, run_trial
 
 SUCCESS_METRICS = ("completion_time_s", "mode_changes", "joystick_input", "opposing_pct")

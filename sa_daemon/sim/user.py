@@ -21,7 +21,8 @@ import numpy as np
 
 from ..config import InputConfig, SimUserConfig
 from ..geometry import FloatArray, Pose, quat_angle, rotation_error
-from ..planner.actions import Mode, axes_to_twist
+from ..model.actions import Mode
+from ..model.twists import axes_to_twist
 
 
 class Phase(str, Enum):
@@ -133,7 +134,7 @@ class SimulatedUser:
     def act(self, pose: Pose, listening: bool = False, blocked: bool = False) -> UserInput:
         """The joystick sample for this instant; ``pose`` is the true current pose. While
         ``listening`` to a question the user keeps still; ``blocked`` says the arm refused the last
-        command (a safety halt: the evaluation's arms never refuse)."""
+        command (a joint stage of the safety pipeline halted it, ``SafetyResult.refuses``)."""
         self._blocked_s = self._blocked_s + self.dt if blocked else 0.0
         self._seen.append(pose)
         seen = self._seen[0]  # the oldest kept pose: ``reaction_delay_s`` ago

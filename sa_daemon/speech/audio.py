@@ -63,11 +63,19 @@ class ArecordSource(AudioSource):
 
     def read(self, n_bytes: int) -> bytes:
         data = super().read(n_bytes)
-        if not data and self._proc.poll() not in (None, 0):
+        if not data and self._exit_code() not in (None, 0):
             assert self._proc.stderr is not None
             err = self._proc.stderr.read().decode(errors="replace").strip().splitlines()
             raise OSError(f"{RECORDER} exited {self._proc.returncode}: {err[-1] if err else 'no message'}")
         return data
+
+    def _exit_code(self) -> int | None:
+        """The recorder's exit code once its output has ended (the end of the pipe comes just before
+        the exit: wait for it briefly), or ``None`` if it is still running."""
+        try:
+            return self._proc.wait(1.0)
+        except subprocess.TimeoutExpired:
+            return None
 
     def close(self) -> None:
         self._proc.kill()

@@ -45,9 +45,9 @@ from enum import Enum
 
 import numpy as np
 
+from ..arm.base import Kinematics, limit_twist
 from ..config import LimitsConfig, SafetyConfig
 from ..geometry import FloatArray, Pose
-from .base import Kinematics, limit_twist
 
 
 class SafetyCode(str, Enum):

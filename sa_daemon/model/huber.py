@@ -12,7 +12,7 @@ their published implementation (see ``docs/model.md``):
   scaled by the robot cost multipliers and shrunk near the goal.
 
 All functions broadcast: positions ``(..., 3)``, quaternions ``(..., 4)``; goal arrays come padded as
-``(G, K, ...)`` (see :class:`~sa_daemon.planner.goalset.GoalSet`).
+``(G, K, ...)`` (see :class:`~sa_daemon.world.goalset.GoalSet`).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""High-level actions and their velocity commands (section III-B).
+"""The velocity generators of the actions (section III-B, Fig. 1), in m/s and rad/s.
 
 * move-to-goal ``g``: proportional twist toward ``k_c``, saturated (translation along ``k_c - x``, rotation
   along the axis-angle of the relative rotation);
@@ -12,58 +12,11 @@ the current joystick mode, the robot twist all six.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from enum import Enum
-
 import numpy as np
 
 from ..config import BlendConfig, InputConfig, MoveConfig
 from ..geometry import FloatArray, rotation_error
-
-
-class ActionKind(str, Enum):
-    MOVE = "move"
-    HO = "ho"
-    NONE = "none"
-    QUESTION = "question"
-
-
-class Mode(str, Enum):
-    """Joystick mode: the 3 axes drive either translation or rotation."""
-
-    TRANSLATION = "translation"
-    ROTATION = "rotation"
-
-
-@dataclass(frozen=True)
-class Action:
-    """A high-level action. ``goal`` indexes the goal set for moves; ``target`` names the high-level
-    target of a move or a question."""
-
-    kind: ActionKind
-    goal: int | None = None
-    target: str | None = None
-
-    @property
-    def label(self) -> str:
-        """Short human form: ``move cup:top``, ``ho``, ``none``, ``ask cup:top``."""
-        if self.kind is ActionKind.MOVE:
-            return f"move {self.target}"
-        if self.kind is ActionKind.QUESTION:
-            return f"ask {self.target}"
-        return self.kind.value
-
-    def to_dict(self) -> dict:
-        d: dict = {"kind": self.kind.value}
-        if self.target is not None:
-            d["goal"] = self.target
-        if self.goal is not None:
-            d["goal_index"] = self.goal
-        return d
-
-
-NO_ASSIST = Action(ActionKind.NONE)
-HO_ACTION = Action(ActionKind.HO)
+from .actions import Mode
 
 
 def mask_to_mode(twist: FloatArray, mode: Mode) -> FloatArray:

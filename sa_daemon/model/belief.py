@@ -20,8 +20,8 @@ import numpy as np
 
 from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
-from .goals import Goal
-from .goalset import GoalSet
+from ..world.goals import Goal
+from ..world.goalset import GoalSet
 from .huber import q_minus_v
 
 

@@ -17,20 +17,13 @@ import numpy as np
 
 from ..config import Config
 from ..geometry import FloatArray, Pose, quat_angle
-from .actions import (
-    HO_ACTION,
-    NO_ASSIST,
-    Action,
-    ActionKind,
-    blend,
-    ho_twist,
-    move_twist,
-)
+from ..world.goalset import GoalSet
+from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
-from .goalset import GoalSet
 from .huber import goal_gradients
 from .methods import MethodSpec, method_spec
 from .reward import opposes
+from .twists import blend, ho_twist, move_twist
 
 ZERO_TWIST = np.zeros(6)
 

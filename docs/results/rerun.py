@@ -1,0 +1,76 @@
+"""Re-run every evaluation recorded in ``docs/results/*.json`` from its own ``meta`` (scene, tasks, methods,
+seeds, arm, configuration) with the current code, and print each summary row old -> new.
+
+    python docs/results/rerun.py [--jobs 2] [--write] [FILE ...]
+
+Without ``--write`` nothing is changed: the old and new summaries are only compared. With it, each file is
+rewritten (trials, summary, and ``meta.config`` as the current code spells it). Files that are not
+evaluations (bench figures) are skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from sa_daemon.config import Config, config_from_dict
+from sa_daemon.sim.evaluate import TrialSpec, run_trials, summarise, write_results
+
+HERE = Path(__file__).resolve().parent
+KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "opposing_pct",
+        "correct_prediction_rate", "questions")
+
+
+def _config(recorded: dict) -> Config:
+    """The recorded configuration, keeping only the keys the current code knows (new keys take their
+    defaults; a removed key cannot have changed the trials of the current code)."""
+    current = Config().model_dump(mode="json")
+
+    def keep(rec: dict, cur: dict) -> dict:
+        return {k: (keep(v, cur[k]) if isinstance(v, dict) and isinstance(cur.get(k), dict) else v)
+                for k, v in rec.items() if k in cur}
+
+    return config_from_dict(keep(recorded, current), "recorded meta.config")
+
+
+def _fmt(row: dict | None) -> str:
+    if row is None:
+        return "-"
+    return " ".join("-" if row[k] is None else f"{row[k]:.2f}" for k in KEYS)
+
+
+def rerun(path: Path, jobs: int, write: bool) -> None:
+    data = json.loads(path.read_text())
+    meta = data.get("meta", {})
+    if "tasks" not in meta or "methods" not in meta:
+        return
+    cfg = _config(meta["config"])
+    specs = [TrialSpec(meta["scene"], task, method, seed)
+             for task in meta["tasks"] for method in meta["methods"] for seed in range(meta["seeds"])]
+    trials = run_trials(specs, cfg, jobs=jobs, progress=False, arm=meta.get("arm", "kinematic"))
+    summary = summarise(trials)
+    old = {(r["task"], r["method"]): r for r in data["summary"]}
+    print(f"\n{path.name} ({meta.get('arm', 'kinematic')}): {' '.join(KEYS)}")
+    for r in summary:
+        o = old.get((r["task"], r["method"]))
+        same = o is not None and all(o[k] == r[k] for k in KEYS)
+        print(f"  {r['task']:<24} {r['method']:<24} {'=' if same else '*'} {_fmt(o)}  ->  {_fmt(r)}")
+    if write:
+        write_results(path, trials, summary, {**meta, "config": cfg.model_dump(mode="json")})
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("files", nargs="*", type=Path)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--write", action="store_true", help="rewrite the files with the new trials")
+    args = ap.parse_args()
+    for f in args.files or sorted(HERE.glob("*.json")):
+        rerun(f, args.jobs, args.write)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

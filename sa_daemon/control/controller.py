@@ -1,0 +1,394 @@
+"""The shared-autonomy controller: the one place where an arm command is computed.
+
+It owns the belief over goals, the adopted plan, the pending question, the joystick's axes and mode, and the
+safety pipeline. It does no I/O and keeps no clock: every call that depends on time takes ``t`` (s, any
+monotonic clock the caller chooses), so the daemon drives it at real time and the evaluation at simulated
+time, and tests drive it in-process. Per control period the caller does, in order::
+
+    ctl.on_input(axes, t); ctl.update_belief(pose, t)     # joystick sample, MaxEnt IOC update
+    snap = ctl.snapshot(pose, budget_s)                   # when a plan is due (None: none is wanted)
+    ctl.accept_plan(snap, planner.plan(snap), t)          # possibly later, in another process
+    tick = ctl.tick(arm.read(), t)                        # blended, safety-filtered command
+    arm.command_twist(tick.safety.twist)
+
+A plan carries the goal set it was computed on (``Snapshot.goals``); the belief's resampling may replace
+that goal set at any input, and the move is carried over to the new set in :meth:`tick`, the only place
+an action meets a goal set.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..arm.base import ArmState, Kinematics
+from ..config import Config
+from ..geometry import FloatArray, Pose
+from ..model.actions import NO_ASSIST, Action, ActionKind, Mode
+from ..model.belief import Belief
+from ..model.methods import method_spec
+from ..model.model import Command, SharedAutonomyModel
+from ..model.twists import axes_to_twist
+from ..planner.snapshot import PlanResult, Snapshot
+from ..world.goalset import GoalSet
+from .safety import SafetyPipeline, SafetyResult
+
+ZERO6 = np.zeros(6)
+
+
+class NoQuestion(ValueError):
+    """An answer arrived while no question is pending."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """An adopted action, the goal set its ``goal`` index refers to, and when it expires (s): a late
+    planner leaves the arm on no-assist instead of an old move."""
+
+    action: Action
+    goals: GoalSet
+    until: float
+
+
+@dataclass(frozen=True)
+class Question:
+    """The pending question about ``target``, asked at ``asked_at`` (s); ``qid`` numbers the questions so
+    that a late answer to one cannot answer the next."""
+
+    target: str
+    asked_at: float
+    qid: int
+
+
+@dataclass(frozen=True)
+class Tick:
+    """One control period's output: the model's blended command, what the safety pipeline made of it
+    (``safety.twist`` is what the arm gets), whether the user's input was fresh, and the error text when
+    the command could not be computed (the arm then gets the user's twist alone, filtered)."""
+
+    command: Command
+    safety: SafetyResult
+    fresh: bool
+    error: str | None = None
+
+    @property
+    def refused(self) -> bool:
+        """The pipeline halted a command that asked for motion (what a UI shows as 'blocked')."""
+        return self.safety.refuses(self.command.total_twist)
+
+
+IDLE_TICK = Tick(Command(NO_ASSIST, ZERO6.copy(), ZERO6.copy(), False), SafetyResult(ZERO6.copy(), ()), False)
+
+
+class Controller:
+    """Belief, plan, question, mode and safety for one arm (see the module doc). Not thread-safe: one
+    caller, the daemon's event loop or the evaluation's step loop."""
+
+    def __init__(self, cfg: Config, goals: GoalSet | tuple, method: str, control_dt: float,
+                 kinematics: Kinematics | None = None) -> None:
+        """``goals``: the scene's goals; ``control_dt``: the control period (s), for the acceleration
+        limit; ``kinematics``: the arm's joints, for the joint stages (``None``: an arm without joints)."""
+        method_spec(method)  # raises on an unknown name
+        self._cfg = cfg
+        self._model = SharedAutonomyModel(cfg)
+        self._safety = SafetyPipeline(cfg.safety, cfg.limits, control_dt, kinematics)
+        self._scene_goals = goals
+        self._method = method
+        self._belief = self._model.initial_belief(goals)
+        self._plan = Plan(NO_ASSIST, self._belief.goals, 0.0)
+        self._question: Question | None = None
+        self._questions = 0
+        self._asked: set[str] = set()
+        self._mode = Mode.TRANSLATION
+        self._axes = np.zeros(3)
+        self._t_input = -math.inf
+        self._input_seq = 0
+        self._assist = True
+        self._gripper_closed = False
+        self._last = IDLE_TICK
+        self._task = 0  # counts resets
+        self._issued: weakref.WeakKeyDictionary[Snapshot, int] = weakref.WeakKeyDictionary()  # -> task
+
+    # -- read-only state ---------------------------------------------------------------------------------
+
+    @property
+    def model(self) -> SharedAutonomyModel:
+        return self._model
+
+    @property
+    def belief(self) -> Belief:
+        return self._belief
+
+    @property
+    def plan(self) -> Plan:
+        return self._plan
+
+    @property
+    def question(self) -> Question | None:
+        return self._question
+
+    @property
+    def asked(self) -> frozenset[str]:
+        """The targets asked about in this task."""
+        return frozenset(self._asked)
+
+    @property
+    def questions_asked(self) -> int:
+        """Questions asked since the controller was made (every task)."""
+        return self._questions
+
+    @property
+    def mode(self) -> Mode:
+        return self._mode
+
+    @property
+    def axes(self) -> FloatArray:
+        """The last joystick sample, normalised to [-1, 1]."""
+        return self._axes.copy()
+
+    @property
+    def t_input(self) -> float:
+        """When the last input sample arrived (s; ``-inf``: none, or the input was lost)."""
+        return self._t_input
+
+    @property
+    def input_seq(self) -> int:
+        """Counts the input samples taken."""
+        return self._input_seq
+
+    @property
+    def assist(self) -> bool:
+        return self._assist
+
+    @property
+    def method(self) -> str:
+        return self._method
+
+    @property
+    def gripper_closed(self) -> bool:
+        """The gripper was last commanded closed (it may not be closed yet)."""
+        return self._gripper_closed
+
+    @property
+    def stopped(self) -> bool:
+        """The safety pipeline's stop is latched."""
+        return self._safety.stopped
+
+    @property
+    def last(self) -> Tick:
+        """The last :meth:`tick`'s output."""
+        return self._last
+
+    @property
+    def user_twist(self) -> FloatArray:
+        """The user's twist (m/s, rad/s) of the last sample in the current mode."""
+        return axes_to_twist(self._axes, self._mode, self._cfg.input)
+
+    def input_fresh(self, t: float) -> bool:
+        """An input sample arrived within ``safety.stale_command_s`` of ``t``."""
+        return t - self._t_input <= self._cfg.safety.stale_command_s
+
+    # -- input -------------------------------------------------------------------------------------------
+
+    def on_input(self, axes: FloatArray, t: float) -> bool:
+        """A joystick sample at ``t``; ``False`` (and nothing changes) unless it is 3 finite numbers.
+        Axes are clipped to [-1, 1]."""
+        a = np.asarray(axes, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            return False
+        self._axes = np.clip(a, -1.0, 1.0)
+        self._t_input = t
+        self._input_seq += 1
+        return True
+
+    def hold_input(self, t: float) -> None:
+        """The input device reports changes only and is connected: its held axes are current at ``t``."""
+        self._t_input = t
+
+    def lose_input(self) -> None:
+        """The input device is gone: axes zero and stale at once, so the next tick commands zero (the
+        pipeline's stale stage) instead of waiting for ``stale_command_s``."""
+        self._axes = np.zeros(3)
+        self._t_input = -math.inf
+
+    def set_mode(self, mode: Mode) -> bool:
+        """Switch the joystick mode; ``True`` if it changed."""
+        mode = Mode(mode)
+        changed = mode is not self._mode
+        self._mode = mode
+        return changed
+
+    def toggle_mode(self) -> Mode:
+        self.set_mode(Mode.ROTATION if self._mode is Mode.TRANSLATION else Mode.TRANSLATION)
+        return self._mode
+
+    def set_assist(self, on: bool) -> None:
+        """Assistance on or off (off: the user's twist alone, still filtered)."""
+        self._assist = bool(on)
+
+    def set_gripper(self, closed: bool) -> None:
+        """The gripper has been commanded closed or open: while closed or closing no motion is commanded
+        (pipeline stage ``gripper_closed``) and no plan is wanted."""
+        self._gripper_closed = bool(closed)
+
+    def set_method(self, method: str) -> None:
+        """Change the assistance method; raises ``ValueError`` on an unknown name. The plan and any
+        pending question are dropped."""
+        method_spec(method)
+        self._method = method
+        self.drop_plan()
+        self._question = None
+
+    # -- belief ------------------------------------------------------------------------------------------
+
+    def update_belief(self, pose: Pose, t: float) -> bool:
+        """The MaxEnt IOC update with the user's twist at ``pose``, if the input is fresh at ``t``;
+        ``True`` if the belief was updated. Resampling may replace the goal set (see :meth:`tick`)."""
+        if not self.input_fresh(t):
+            return False
+        self._belief = self._model.update_input(self._belief, pose, self.user_twist)
+        return True
+
+    # -- questions ---------------------------------------------------------------------------------------
+
+    def ask(self, target: str, t: float) -> Question:
+        """Pose the question about ``target`` at ``t``; the arm holds still until it is answered."""
+        self._questions += 1
+        self._question = Question(target, t, self._questions)
+        self._asked.add(target)
+        return self._question
+
+    def on_answer(self, yes: bool, t: float) -> Question:
+        """Apply a yes/no answer to the pending question (final, ``docs/model.md``) and return it; the plan
+        is dropped so that the next one uses the new belief. :class:`NoQuestion` if none is pending."""
+        q = self._question
+        if q is None:
+            raise NoQuestion("no question is pending")
+        self._belief = self._model.update_answer(self._belief, q.target, bool(yes))
+        self._question = None
+        self.drop_plan()
+        return q
+
+    def expire_question(self, t: float) -> Question | None:
+        """Drop the pending question if it has waited longer than ``runtime.question_timeout_s``; return it
+        if it was dropped."""
+        q = self._question
+        if q is None or t - q.asked_at <= self._cfg.runtime.question_timeout_s:
+            return None
+        self._question = None
+        self.drop_plan()
+        return q
+
+    def drop_question(self) -> Question | None:
+        q, self._question = self._question, None
+        return q
+
+    # -- plans -------------------------------------------------------------------------------------------
+
+    def snapshot(self, pose: Pose, budget_s: float | None, node_budget: int | None = None) -> Snapshot | None:
+        """What the planner needs now, or ``None`` when no plan is wanted (a question is pending or the
+        gripper is closed). A rule-based method's snapshot is planned by the solver without search; the
+        daemon spares the worker that round trip with :meth:`adopt_fixed`."""
+        if self._question is not None or self._gripper_closed:
+            return None
+        b = self._belief
+        snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
+                        self._method, budget_s=budget_s, node_budget=node_budget)
+        self._issued[snap] = self._task
+        return snap
+
+    def accept_plan(self, snap: Snapshot, result: PlanResult, t: float) -> Question | None:
+        """Adopt the planner's choice for ``snap`` at ``t``. A question is asked (and returned); a move, HO
+        or no-assist becomes the plan until ``t + 2 planner.period_s`` (the next plan is due in one
+        period; one more of grace). A plan is moot, and ignored, when a question arrived meanwhile, the
+        method changed, the gripper was closed, or its snapshot was taken before the last :meth:`reset`."""
+        stale_task = self._issued.get(snap, self._task) != self._task
+        if self._question is not None or snap.method != self._method or self._gripper_closed or stale_task:
+            return None
+        action = result.action
+        if action.kind is ActionKind.QUESTION:
+            return self.ask(str(action.target), t)
+        self._plan = Plan(action, snap.goals, t + 2 * self._cfg.planner.period_s)
+        return None
+
+    def adopt_fixed(self) -> None:
+        """A rule-based method's action for the current belief (``manual``, ``ho``, ``blend``, ...), valid
+        until the next call."""
+        b = self._belief
+        self._plan = Plan(self._model.fixed_action(self._method, b.goals, b.probs), b.goals, math.inf)
+
+    def drop_plan(self) -> None:
+        """No-assist until the next plan."""
+        self._plan = Plan(NO_ASSIST, self._belief.goals, 0.0)
+
+    def current_action(self, t: float) -> Action:
+        """The action applied at ``t``: a pending question holds the arm; assistance off or an expired plan
+        (a late or dead planner) gives no-assist."""
+        if self._question is not None:
+            return Action(ActionKind.QUESTION, None, self._question.target)
+        if not self._assist or t > self._plan.until:
+            return NO_ASSIST
+        return self._plan.action
+
+    # -- the task ----------------------------------------------------------------------------------------
+
+    def use_arm(self, kinematics: Kinematics | None) -> None:
+        """The arm's joint model for the pipeline's joint stages (``None``: an arm without joints); call it
+        whenever the arm is (re)built."""
+        self._safety.kinematics = kinematics
+
+    def reset(self) -> None:
+        """A new task from the start: uniform belief over the scene's goals, nothing asked, translation
+        mode, gripper open, the stop released and the arm restarting from rest. Plans for snapshots of
+        the previous task are moot from now on."""
+        self._task += 1
+        self._belief = self._model.initial_belief(self._scene_goals)
+        self._asked.clear()
+        self._question = None
+        self.drop_plan()
+        self._mode = Mode.TRANSLATION
+        self._gripper_closed = False
+        self._safety.resume()
+
+    # -- stop --------------------------------------------------------------------------------------------
+
+    def stop(self) -> None:
+        """Latch the stop: every tick commands zero until :meth:`resume`."""
+        self._safety.stop()
+
+    def resume(self) -> None:
+        """Release the stop; the arm restarts from rest (acceleration-limited)."""
+        self._safety.resume()
+
+    # -- control -----------------------------------------------------------------------------------------
+
+    def tick(self, state: ArmState, t: float) -> Tick:
+        """The command for this control period at the arm's ``state``: the current action's twist blended
+        with the user's (zero when the input is stale), then the safety pipeline."""
+        fresh = self.input_fresh(t)
+        u = self.user_twist if fresh else ZERO6.copy()
+        action = self._carried_action(t, state.pose)
+        error = None
+        try:
+            cmd = self._model.command(action, self._belief.goals, self._belief.probs, state.pose, u, self._method)
+        except (ValueError, FloatingPointError) as e:
+            cmd, error = Command(NO_ASSIST, ZERO6.copy(), u, False), str(e)
+        result = self._safety.filter(
+            cmd.total_twist, state.pose, input_fresh=fresh, fault=state.fault is not None, joints=state.joints,
+            gripper_closed=state.gripper_closed or self._gripper_closed,  # closed, or closing (not yet reported)
+        )
+        self._last = Tick(cmd, result, fresh, error)
+        return self._last
+
+    def _carried_action(self, t: float, pose: Pose) -> Action:
+        """:meth:`current_action`, its goal index carried over to the belief's goal set when resampling
+        replaced the one the plan was computed on."""
+        action = self.current_action(t)
+        plan = self._plan
+        if action.kind is ActionKind.MOVE and plan.goals is not self._belief.goals:
+            action = self._model.remap_action(action, plan.goals, self._belief.goals, pose)
+            self._plan = Plan(action, self._belief.goals, plan.until)
+        return action
