@@ -166,6 +166,41 @@ class SimUserConfig(_Section):
     close_translation_m: float = Field(0.01, gt=0, description="close the gripper within this ...")
     close_rotation_rad: float = Field(math.pi / 48, gt=0, description="... and this of the desired pose")
     timeout_s: float = Field(100.0, gt=0, description="a trial fails after this long")
+    # -- the population's behaviours (docs/simulated-user.md, "Users"); the defaults are the calibrated user
+    order: Literal["translate_first", "rotate_first"] = Field(
+        "translate_first", description="translate to the pre-grasp point first, or align the gripper first"
+    )
+    one_axis: bool = Field(False, description="push only the axis with the largest error at a time")
+    burst_s: float = Field(0.0, ge=0, description="push in bursts this long (s; 0: continuously) ...")
+    burst_pause_s: float = Field(0.0, ge=0, description="... separated by releases this long (s)")
+    tremor_std: float = Field(0.0, ge=0, le=1, description="tremor amplitude per axis (joystick units, std)")
+    tremor_hz: float = Field(5.0, gt=0, le=20, description="tremor frequency (Hz)")
+    corrective_switch_hz: float = Field(
+        0.0, ge=0, description="rate of extra mode switches to check the other mode and back (1/s)"
+    )
+    pose_choice: Literal["closest", "other", "off_list", "random"] = Field(
+        "closest", description="which pose of its goal it wants (closest by k_c's metric, another, none listed)"
+    )
+    off_list_m: float = Field(0.02, ge=0, le=0.05, description="off_list: translation from the nearest listed pose (m)")
+    off_list_rad: float = Field(
+        math.radians(15.0), ge=0, le=math.pi / 4, description="off_list: rotation from the nearest listed pose (rad)"
+    )
+    start_pause_s: float = Field(0.0, ge=0, description="still this long before its first input (s)")
+    mid_pause_s: float = Field(0.0, ge=0, description="still this long once, halfway to the pre-grasp point (s)")
+    close_translation_max_m: float | None = Field(
+        None, gt=0, le=0.1, description="closes within a tolerance drawn per trial in [close_translation_m, this] (m)"
+    )
+    answer_delay_max_s: float | None = Field(
+        None, ge=0, description="answers after a uniform delay in [answer_delay_s, this] (s; None: always answer_delay_s)"
+    )
+
+    @model_validator(mode="after")
+    def _answer_delays(self) -> SimUserConfig:
+        if self.answer_delay_max_s is not None and self.answer_delay_max_s < self.answer_delay_s:
+            raise ValueError("answer_delay_max_s must be at least answer_delay_s")
+        if self.close_translation_max_m is not None and self.close_translation_max_m < self.close_translation_m:
+            raise ValueError("close_translation_max_m must be at least close_translation_m")
+        return self
 
 
 class EvalConfig(_Section):

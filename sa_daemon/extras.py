@@ -14,6 +14,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "bench": ("pomdp-py", "the pomdp_py peer of `bench planner`"),
     "xarm": ("xarm-python-sdk", 'arm.backend "xarm" (--arm xarm)'),
     "voice": ("pocketsphinx", "answers by voice (`[voice]`, `hear`, `bench voice`)"),
+    "ray": ("ray", "`eval --backend ray`"),
 }
 
 

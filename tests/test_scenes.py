@@ -54,7 +54,7 @@ def write(tmp_path: Path, text: str, name: str = "bad.toml") -> str:
 
 
 def test_builtin_names() -> None:
-    assert builtin_scene_names() == ["scene1", "scene2", "study-simple"]
+    assert builtin_scene_names() == ["scene1", "scene2", "study-complex", "study-simple"]
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_TARGETS))
@@ -264,7 +264,7 @@ def test_rim_on_a_box_is_refused() -> None:
 
 
 def test_unknown_scene_name() -> None:
-    with pytest.raises(SceneError, match="scene1, scene2, study-simple"):
+    with pytest.raises(SceneError, match="scene1, scene2, study-complex, study-simple"):
         load_scene("scene9")
 
 

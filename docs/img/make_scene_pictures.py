@@ -1,8 +1,8 @@
 """Draw the pictures used by docs/scenes.md (run from anywhere: ``python docs/img/make_scene_pictures.py``).
 
-Writes ``scene1.png``, ``scene2.png``, ``study-simple.png`` (top and side view of each built-in scene:
-objects, start pose and every grasp pose as an approach arrow with a closing-axis tick, coloured by goal)
-and ``grasp_types.png`` (the six grasp types) next to this script. Lengths in m.
+Writes ``scene1.png``, ``scene2.png``, ``study-simple.png``, ``study-complex.png`` (top and side view of
+each built-in scene: objects, start pose and every grasp pose as an approach arrow with a closing-axis
+tick, coloured by goal) and ``grasp_types.png`` (the six grasp types) next to this script. Lengths in m.
 """
 
 from __future__ import annotations
@@ -170,7 +170,7 @@ def draw_grasp_types(path: Path) -> None:
 
 
 def main() -> None:
-    for name in ("scene1", "scene2", "study-simple"):
+    for name in ("scene1", "scene2", "study-simple", "study-complex"):
         draw_scene(load_scene(name), HERE / f"{name}.png")
     draw_grasp_types(HERE / "grasp_types.png")
     print(f"wrote pictures to {HERE}")

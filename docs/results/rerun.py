@@ -16,7 +16,13 @@ import sys
 from pathlib import Path
 
 from sa_daemon.config import Config, config_from_dict
-from sa_daemon.sim.evaluate import TrialSpec, run_trials, summarise, write_results
+from sa_daemon.sim.evaluate import (
+    TrialSpec,
+    compare,
+    run_trials,
+    summarise,
+    write_results,
+)
 
 HERE = Path(__file__).resolve().parent
 KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "opposing_pct",
@@ -38,27 +44,35 @@ def _config(recorded: dict) -> Config:
 def _fmt(row: dict | None) -> str:
     if row is None:
         return "-"
-    return " ".join("-" if row[k] is None else f"{row[k]:.2f}" for k in KEYS)
+    return " ".join("-" if row.get(k) is None else f"{row[k]:.2f}" for k in KEYS)
 
 
 def rerun(path: Path, jobs: int, write: bool) -> None:
     data = json.loads(path.read_text())
     meta = data.get("meta", {})
-    if "tasks" not in meta or "methods" not in meta:
+    parts = meta.get("parts") or ([{"scene": meta["scene"], "tasks": meta["tasks"], "methods": meta["methods"]}]
+                                  if "tasks" in meta and "methods" in meta else [])
+    if not parts:
         return
     cfg = _config(meta["config"])
-    specs = [TrialSpec(meta["scene"], task, method, seed)
-             for task in meta["tasks"] for method in meta["methods"] for seed in range(meta["seeds"])]
+    users = meta.get("users") or ["calibrated"]
+    specs = [TrialSpec(p["scene"], task, method, seed, user) for p in parts for task in p["tasks"] for user in users
+             for method in p["methods"] for seed in range(meta["seeds"])]
     trials = run_trials(specs, cfg, jobs=jobs, progress=False, arm=meta.get("arm", "kinematic"))
     summary = summarise(trials)
-    old = {(r["task"], r["method"]): r for r in data["summary"]}
+    comparisons = compare(trials)
+
+    def key(r: dict) -> tuple:
+        return r.get("scene"), r["task"], r.get("user", "calibrated"), r["method"]
+
+    old = {key(r): r for r in data["summary"]}
     print(f"\n{path.name} ({meta.get('arm', 'kinematic')}): {' '.join(KEYS)}")
     for r in summary:
-        o = old.get((r["task"], r["method"]))
-        same = o is not None and all(o[k] == r[k] for k in KEYS)
-        print(f"  {r['task']:<24} {r['method']:<24} {'=' if same else '*'} {_fmt(o)}  ->  {_fmt(r)}")
+        o = old.get(key(r)) or old.get((None, r["task"], "calibrated", r["method"]))
+        same = o is not None and all(o.get(k) == r[k] for k in KEYS)
+        print(f"  {r['task']:<24} {r['user']:<18} {r['method']:<24} {'=' if same else '*'} {_fmt(o)}  ->  {_fmt(r)}")
     if write:
-        write_results(path, trials, summary, {**meta, "config": cfg.model_dump(mode="json")})
+        write_results(path, trials, summary, {**meta, "config": cfg.model_dump(mode="json")}, comparisons)
 
 
 def main() -> int:

@@ -11,6 +11,8 @@ from pathlib import Path
 from ..arm.backends import SIMULATED_BACKENDS
 from ..config import METHODS, Config, ConfigError, load_config
 from ..extras import MissingExtra
+from ..sim.suites import SUITES
+from ..sim.users import builtin_user_names
 from ..world.goals import parse_target
 from ..world.scene import SceneError, builtin_scene_names, load_scene
 from . import verbs
@@ -29,33 +31,62 @@ def _add_scene(p: argparse.ArgumentParser, required: bool = True) -> None:
 def cmd_eval(args: argparse.Namespace) -> int:
     from ..sim.evaluate import (
         TrialSpec,
+        compare,
         format_summary,
         run_trials,
         summarise,
         write_results,
     )
+    from ..sim.suites import SuitePart, suite
+    from ..sim.users import CALIBRATED, load_user
 
     cfg = load_config(args.config)
-    scene = load_scene(_scene_arg(args))
-    tasks = args.task or scene.targets
-    for t in tasks:
-        parse_target(t)
-        scene.goal(t)
-    methods = args.method or list(METHODS)
-    specs = [TrialSpec(_scene_arg(args), t, m, s) for t in tasks for m in methods for s in range(args.seeds)]
+    users = args.user or [CALIBRATED]
+    for u in users:
+        load_user(u).apply(cfg)  # a bad profile is refused (exit 2) before anything runs
+    if args.suite:
+        s = suite(args.suite)
+        parts = [SuitePart(p.scene, tuple(args.task or p.tasks), tuple(args.method or p.methods)) for p in s.parts]
+    else:
+        if not _scene_arg(args):
+            raise ConfigError("eval: give --scene, --scene-file or --suite")
+        scene = load_scene(_scene_arg(args))
+        parts = [SuitePart(_scene_arg(args), tuple(args.task or scene.targets), tuple(args.method or METHODS))]
+    for part in parts:
+        scene = load_scene(part.scene)
+        for t in part.tasks:
+            parse_target(t)
+            scene.goal(t)
+    seeds = args.seeds or (suite(args.suite).seeds if args.suite else 5)
+    specs = [TrialSpec(p.scene, t, m, seed, u) for p in parts for t in p.tasks for u in users for m in p.methods
+             for seed in range(seeds)]
     plots = Path(args.plots) if args.plots else None
-    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots, arm=args.arm)
+    trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots, arm=args.arm,
+                        backend=args.backend, address=args.address)
     summary = summarise(trials)
-    print(format_summary(summary))
+    comparisons = compare(trials)
+    print(format_summary(summary, comparisons=comparisons))
+    print("stars: policy differs from that method on that metric (paired Wilcoxon over seeds, Holm per task"
+          " and user: * p<0.05 ** p<0.01 *** p<0.001 **** p<0.0001)")
+    if trials.speed is not None:
+        print(trials.speed.line())
     if plots is not None:
         from ..sim.plots import plot_summary_bars
 
-        bars = plot_summary_bars(summary, plots / f"summary_{scene.name.replace(' ', '-')}.png", title=scene.name)
-        print(f"wrote {len(trials)} timelines and {bars} to {plots}")
+        for part in parts:
+            name = load_scene(part.scene).name
+            rows = [r for r in summary if r["scene"] == name]
+            bars = plot_summary_bars(rows, plots / f"summary_{name.replace(' ', '-')}.png", title=name,
+                                     comparisons=comparisons)
+            print(f"wrote {bars}")
+        print(f"wrote {len(trials)} timelines to {plots}")
     if args.json:
-        meta = {"scene": scene.name, "tasks": tasks, "methods": methods, "seeds": args.seeds,
-                "arm": args.arm, "config": cfg.model_dump(mode="json")}
-        write_results(args.json, trials, summary, meta)
+        meta = {"suite": args.suite, "scenes": [load_scene(p.scene).name for p in parts],
+                "parts": [{"scene": p.scene, "tasks": list(p.tasks), "methods": list(p.methods)} for p in parts],
+                "users": users, "seeds": seeds, "arm": args.arm, "config": cfg.model_dump(mode="json")}
+        if len(parts) == 1:  # the single-scene keys older files have (docs/results/rerun.py reads either)
+            meta.update(scene=meta["scenes"][0], tasks=list(parts[0].tasks), methods=list(parts[0].methods))
+        write_results(args.json, trials, summary, meta, comparisons)
         print(f"wrote {args.json}")
     return 0
 
@@ -123,16 +154,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="config.toml (default: built-in defaults)")
     sub = p.add_subparsers(dest="command", required=True)
 
-    e = sub.add_parser("eval", help="run tasks x methods x seeds with the simulated user")
-    _add_scene(e)
-    e.add_argument("--task", action="append", help="object:grasp_type (repeatable; default: every target)")
-    e.add_argument("--method", action="append", choices=METHODS, help="repeatable; default: all eight")
-    e.add_argument("--seeds", type=int, default=5)
+    e = sub.add_parser("eval", help="run tasks x users x methods x seeds with simulated users")
+    _add_scene(e, required=False)
+    e.add_argument("--suite", choices=sorted(SUITES), help="a named experiment of the paper (docs/results.md)")
+    e.add_argument("--task", action="append", help="object:grasp_type (repeatable; default: every target, or the suite's)")
+    e.add_argument("--method", action="append", choices=METHODS, help="repeatable; default: all eight, or the suite's")
+    e.add_argument("--user", action="append", metavar="NAME|FILE",
+                   help=f"simulated user profile, repeatable (built-in: {', '.join(builtin_user_names())}; default calibrated)")
+    e.add_argument("--seeds", type=int, help="seeds per cell (default 5; with --suite the suite's: 10, table1 20, "
+                   "enough for a paired test to reach p < 0.05 after the Holm correction)")
     e.add_argument("--json", help="write trials and summary to this file")
     e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
     e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     e.add_argument("--arm", choices=SIMULATED_BACKENDS, default="kinematic",
                    help="kinematic: exact twist integration; mujoco: physics, success also needs a lift")
+    e.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local: this machine's process pool (--jobs); ray: a Ray cluster (extra: ray)")
+    e.add_argument("--address", help="with --backend ray: an existing cluster (e.g. auto, ray://HOST:10001)")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_eval)
 

@@ -51,7 +51,7 @@ def launch_of(args: argparse.Namespace, exit_when_done: bool | None = None) -> L
     """``run``'s flags as a :class:`~.launch.Launch`."""
     return Launch(scene=args.scene_file or args.scene or DEFAULT_SCENE, tasks=tuple(args.task or ()),
                   input=args.input, duration_s=args.duration, seed=args.seed, progress=not args.quiet,
-                  exit_when_done=exit_when_done)
+                  exit_when_done=exit_when_done, user=args.user or "calibrated")
 
 
 def build_daemon(args: argparse.Namespace) -> Any:
@@ -186,6 +186,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speech-wav", help="also write every spoken question as a WAV file in this folder")
     p.add_argument("--no-speech", action="store_true", help="publish questions without speaking them")
     p.add_argument("--seed", type=int, default=0, help="simulated user's random seed")
+    p.add_argument("--user", metavar="NAME|FILE", help="simulated user profile (docs/simulated-user.md; default calibrated)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 

@@ -25,7 +25,8 @@ class Launch:
     """What to run, besides the config: ``scene`` (a built-in name or a scene file), the simulated user's
     ``tasks`` (default: ``cup:top`` where the scene has it, else its first target), the ``input`` backend
     (``sim`` or ``evdev``), ``duration_s`` (``None``: until stopped, or until the tasks are done),
-    the simulated user's ``seed``, progress lines, and ``exit_when_done`` (default: when no duration)."""
+    the simulated user's ``seed``, progress lines, ``exit_when_done`` (default: when no duration), and
+    the simulated ``user``'s profile."""
 
     scene: str = DEFAULT_SCENE
     tasks: Sequence[str] = ()
@@ -34,6 +35,7 @@ class Launch:
     seed: int = 0
     progress: bool = True
     exit_when_done: bool | None = None
+    user: str = "calibrated"  # the simulated user's profile: a built-in name or a file (sim/users.py)
 
 
 def build_daemon(cfg: Config, launch: Launch) -> Daemon:
@@ -48,6 +50,10 @@ def build_daemon(cfg: Config, launch: Launch) -> Daemon:
         from ..arm.reach import reachable_scene
 
         scene = reachable_scene(scene, ArmKinematics(), cfg.safety.joint_margin_rad)
+    if launch.input == "sim":  # the simulated user's profile: its [sim_user] over the config's
+        from ..sim.users import load_user
+
+        cfg = load_user(launch.user).apply(cfg)
     exit_when_done = launch.duration_s is None if launch.exit_when_done is None else launch.exit_when_done
     opts = RunOptions(
         scene=scene, arm=cfg.arm.backend, input=launch.input, tasks=tasks, method=cfg.method,

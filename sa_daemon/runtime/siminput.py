@@ -16,6 +16,7 @@ from ..config import Config
 from ..geometry import Pose
 from ..model.actions import Mode
 from ..sim.episode import desired_pose
+from ..sim.success import Outcome, grasp_outcome, scene_object
 from ..sim.user import SimulatedUser
 from ..world.scene import Scene
 
@@ -52,7 +53,7 @@ class SimInput:
         task = self.tasks[self.index % len(self.tasks)]
         rng = np.random.default_rng([self.seed, self.index])
         goal = self.scene.goal(task)
-        want = desired_pose(goal, start, self.cfg, rng, "closest")
+        want = desired_pose(goal, start, self.cfg, rng, obj=scene_object(self.scene, goal.object))
         self.user = SimulatedUser(task, want, self.cfg.sim_user, self.cfg.input, rng, self.dt)
         self.task_started = now
         return task
@@ -68,5 +69,13 @@ class SimInput:
         assert self.user is not None
         return self.user.answer(target)
 
-    def at_goal(self, pose: Pose) -> bool:
-        return self.user is not None and self.user.at_goal(pose)
+    def answer_delay(self, qid: int) -> float:
+        """How long the user takes to answer question ``qid`` (s)."""
+        assert self.user is not None
+        return self.user.answer_delay(qid)
+
+    def outcome(self, closed_at: Pose | None) -> Outcome:
+        """The task's outcome with the gripper closed at ``closed_at`` (``None``: it timed out): the
+        geometric rule of ``world/holding.py`` (``sim/success.py``), on every arm."""
+        assert self.task is not None
+        return grasp_outcome(self.scene, self.task, closed_at)

@@ -30,8 +30,10 @@ from ..model.actions import Mode
 from ..planner.snapshot import PlanResult, Snapshot
 from ..planner.solver import Solver
 from ..world.goals import Goal
-from ..world.scene import Scene
+from ..world.holding import holds
+from ..world.scene import Scene, SceneObject
 from . import metrics
+from .success import grasp_outcome, scene_object
 from .user import SimulatedUser
 
 ArmFactory = Callable[[Scene, Config], Arm]
@@ -80,23 +82,60 @@ class TrialResult:
     plans: int
     targets: list[str] = field(default_factory=list)
     timeline: Timeline | None = None
+    failure: str = ""  # why it failed (sim/success.py); "" for a success
+    user: str = "calibrated"  # the simulated user's profile (sim/users.py)
 
     def metrics(self) -> dict:
         """The JSON record of the trial (without the timeline)."""
         return {
             k: getattr(self, k)
             for k in (
-                "scene", "task", "method", "seed", "success", "completion_time_s", "mode_changes",
+                "scene", "task", "user", "method", "seed", "success", "failure", "completion_time_s", "mode_changes",
                 "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
             )
         }
 
 
-def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str) -> Pose:
-    """The user's wanted pose: the goal's pose closest to the start, or a seeded random one."""
+def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str | None = None,
+                 obj: SceneObject | None = None) -> Pose:
+    """The pose the user wants (``choice``, default ``sim_user.pose_choice``):
+
+    * ``closest``: the goal's pose closest to the start by the planner's own metric (``k_c``);
+    * ``random``: a seeded random pose of the goal;
+    * ``other``: a seeded random pose of the goal other than ``k_c`` (``k_c`` if the goal has one pose);
+    * ``off_list``: in no list (section VI-E.4): ``k_c`` shifted along its tool x axis (across the closing
+      axis and the approach) by up to ``off_list_m`` and turned about its approach by up to
+      ``off_list_rad``, both uniform and seeded, redrawn (up to 50 times, then halved) until the
+      gripper closed there would still hold ``obj`` (``world/holding.py``).
+    """
+    choice = choice or cfg.sim_user.pose_choice
+    kc = goal.desired_pose(start, cfg.intent.rotation_weight_m_per_rad)
     if choice == "random":
         return goal.poses[int(rng.integers(len(goal.poses)))]
-    return goal.desired_pose(start, cfg.intent.rotation_weight_m_per_rad)
+    if choice == "other":
+        others = [p for p in goal.poses if p is not kc]
+        return others[int(rng.integers(len(others)))] if others else kc
+    if choice == "off_list":
+        return _off_list(kc, goal, cfg, rng, obj)
+    return kc
+
+
+def _off_list(kc: Pose, goal: Goal, cfg: Config, rng: np.random.Generator, obj: SceneObject | None) -> Pose:
+    su = cfg.sim_user
+    scale = 1.0
+    for attempt in range(200):
+        if attempt and attempt % 50 == 0:
+            scale /= 2.0
+        shift = float(rng.uniform(-1.0, 1.0)) * su.off_list_m * scale
+        turn = float(rng.uniform(-1.0, 1.0)) * su.off_list_rad * scale
+        r = kc.rotation
+        position = kc.position + shift * r[:, 0]
+        c, s = np.cos(turn), np.sin(turn)
+        about_z = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        pose = Pose.from_matrix(position, r @ about_z)
+        if obj is None or holds(obj, pose, goal.grasp_type).held:
+            return pose
+    return kc
 
 
 def run_trial(
@@ -107,7 +146,8 @@ def run_trial(
     cfg: Config,
     arm_factory: ArmFactory = kinematic_arm,
     record: bool = False,
-    pose_choice: str = "closest",
+    pose_choice: str | None = None,
+    user_name: str = "calibrated",
     on_plan: Callable[[Snapshot, PlanResult], None] | None = None,
 ) -> TrialResult:
     """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``."""
@@ -117,7 +157,8 @@ def run_trial(
         scene = reachable_scene(scene, arm.kinematics, cfg.safety.joint_margin_rad)
     goal = scene.goal(task)
     dt = 1.0 / cfg.eval.control_hz
-    user = SimulatedUser(task, desired_pose(goal, scene.start, cfg, rng, pose_choice), cfg.sim_user, cfg.input, rng, dt)
+    want = desired_pose(goal, scene.start, cfg, rng, pose_choice, scene_object(scene, goal.object))
+    user = SimulatedUser(task, want, cfg.sim_user, cfg.input, rng, dt)
     ctl = Controller(cfg, scene.goals, method, dt, arm.kinematics)
     solver = Solver(ctl.model)
     plan_every = max(1, round(cfg.planner.period_s / dt))
@@ -142,7 +183,7 @@ def run_trial(
         ctl.update_belief(state.pose, t)
         answered = False
         q = ctl.question
-        if q is not None and t - q.asked_at >= cfg.sim_user.answer_delay_s - 1e-9:
+        if q is not None and t - q.asked_at >= user.answer_delay(q.qid) - 1e-9:
             ctl.on_answer(user.answer(q.target), t)
             answered = True  # re-plan now, with the answer
         if step % plan_every == 0 or answered:
@@ -172,17 +213,16 @@ def run_trial(
             timeline.mode.append(inp.mode.value)
     elapsed = len(axes) * dt
     final_p = ctl.belief.target_probabilities()[task]
-    success = closed and user.at_goal(arm.read().pose)
-    lift_test = getattr(arm, "lift_test", None)
-    if success and callable(lift_test):
-        success = lift_test() == goal.object  # physics: the gripper must hold the task's object
+    outcome = grasp_outcome(scene, task, arm.read().pose if closed else None, arm)
     arm.close()
     return TrialResult(
         scene=scene.name,
         task=task,
         method=method,
         seed=seed,
-        success=bool(success),
+        success=outcome.success,
+        failure=outcome.reason,
+        user=user_name,
         completion_time_s=round(elapsed, 6),
         mode_changes=metrics.mode_changes([Mode.TRANSLATION.value] + modes),
         joystick_input=metrics.joystick_input(axes),

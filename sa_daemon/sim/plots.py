@@ -154,25 +154,37 @@ def plot_timeline(result: TrialResult, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-def _key(row: dict) -> tuple[str, str]:
-    return str(row.get("scene", "")), str(row["task"])
+def _key(row: dict) -> tuple[str, str, str]:
+    return str(row.get("scene", "")), str(row["task"]), str(row.get("user", "calibrated"))
 
 
-def plot_summary_bars(rows: list[dict], path: str | Path, title: str | None = None) -> Path:
+# summary key -> the metric name of sim/evaluate.py's comparisons
+_COMPARED = {"completion_time_s": "completion_time_s", "mode_changes": "mode_changes",
+             "joystick_input": "joystick_input", "opposing_pct": "opposing_pct", "questions": "questions",
+             "success_rate": "success"}
+
+
+def plot_summary_bars(rows: list[dict], path: str | Path, title: str | None = None,
+                      comparisons: list[dict] | None = None) -> Path:
     """Fig. 7 style grouped bars of ``summarise()`` rows, written as a PNG to ``path``; returns the path.
 
-    One panel per metric of ``SUMMARY_METRICS`` (units in the axis labels), tasks on the x axis, one bar
-    per method in a colour kept across panels, error bars (one standard deviation) from the ``_std`` keys
-    when present, and a small 'x' at zero where a value is missing (None, e.g. no successful trial).
+    One panel per metric of ``SUMMARY_METRICS`` (units in the axis labels), tasks (and users, when there
+    are several) on the x axis, one bar per method in a colour kept across panels, error bars from the
+    95 % bootstrap interval (``ci95``) when present, else one standard deviation (``_std``), a small 'x'
+    at zero where a value is missing (None, e.g. no successful trial), and, with ``comparisons``, the
+    stars of policy's Holm-corrected difference from that method above its bar.
     ``ValueError`` if ``rows`` is empty.
     """
     if not rows:
         raise ValueError("no summary rows to plot")
+    star = {(c["scene"], c["task"], c["user"], c["baseline"], c["metric"]): c["stars"] for c in comparisons or []}
     tasks = list(dict.fromkeys(_key(r) for r in rows))
     methods = list(dict.fromkeys(str(r["method"]) for r in rows))
     table = {(_key(r), str(r["method"])): r for r in rows}
-    multi_scene = len({s for s, _ in tasks}) > 1
-    tick_labels = [f"{s}\n{task}" if multi_scene else task for s, task in tasks]
+    multi_scene = len({s for s, _, _ in tasks}) > 1
+    multi_user = len({u for _, _, u in tasks}) > 1
+    tick_labels = [("\n".join(x for x in ((s if multi_scene else ""), task, (u if multi_user else "")) if x))
+                   for s, task, u in tasks]
     cmap = plt.get_cmap("tab10")
     colours = {m: cmap(i % 10) for i, m in enumerate(methods)}
     width = 0.8 / len(methods)
@@ -188,15 +200,35 @@ def plot_summary_bars(rows: list[dict], path: str | Path, title: str | None = No
             xs = x - 0.4 + width * (k + 0.5)
             present = [(task, method) in table for task in tasks]  # no row: nothing drawn
             vals = [table[(task, method)].get(key) if p else None for task, p in zip(tasks, present)]
-            errs = [table[(task, method)].get(key + "_std") if p else None for task, p in zip(tasks, present)]
+            lo_hi = []
+            for task, p, v in zip(tasks, present, vals):
+                r = table[(task, method)] if p else {}
+                ci = (r.get("ci95") or {}).get(key)
+                sd = r.get(key + "_std")
+                if v is None:
+                    continue
+                if ci is not None:
+                    lo_hi.append((float(v) - ci[0], ci[1] - float(v)))
+                elif sd is not None:
+                    lo_hi.append((float(sd), float(sd)))
+                else:
+                    lo_hi.append((np.nan, np.nan))
             ok = np.array([v is not None for v in vals])
             missing = np.array(present) & ~ok
             if ok.any():
                 heights = np.array([float(v) for v in vals if v is not None])
-                yerr = np.array([np.nan if e is None else float(e) for v, e in zip(vals, errs) if v is not None])
+                yerr = np.maximum(np.array(lo_hi, dtype=float).T, 0.0)
                 ax.bar(xs[ok], heights, width * 0.95, color=colours[method],
                        yerr=None if np.isnan(yerr).all() else yerr,
                        error_kw={"elinewidth": 0.9, "capsize": 2.5, "ecolor": "0.2"})
+                metric = _COMPARED.get(key)
+                for xi, (task, h, e) in zip(xs[ok], [(t, hv, ev) for t, hv, ev in
+                                                      zip([t for t, v in zip(tasks, vals) if v is not None],
+                                                          heights, yerr.T)]):
+                    mark = star.get((task[0], task[1], task[2], method, metric), "") if metric else ""
+                    if mark:
+                        ax.text(xi, h + (0.0 if np.isnan(e[1]) else e[1]), mark, ha="center", va="bottom",
+                                fontsize=7, rotation=90 if len(mark) > 2 else 0)
             if missing.any():
                 ax.plot(xs[missing], np.zeros(int(missing.sum())), "x", color=colours[method], ms=7, mew=1.8,
                         clip_on=False)

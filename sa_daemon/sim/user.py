@@ -2,13 +2,18 @@
 
 It knows its task and wants one grasp pose of that goal. Like the paper's users it drives one mode at a
 time: translate to a pre-grasp point behind the grasp (along the approach axis), switch to rotation and
-align the gripper, switch back and translate in. Its command is a saturated proportional twist toward
-where it wants to be, computed from the pose it saw ``reaction_delay_s`` ago, plus Gaussian noise: it
+align the gripper, switch back and translate in (or, ``order = "rotate_first"``, align first). Its command
+is a saturated proportional twist toward where it wants to be, computed from the pose it saw
+``reaction_delay_s`` ago, plus Gaussian noise (and, per profile, tremor, bursts, one axis at a time): it
 naturally fights wrong assistance. It re-plans its mode whenever the assistance disturbs the part it is
-not driving. A user whose arm refuses to move on the way to the pre-grasp point (the daemon's safety
-pipeline halts it, e.g. at a wrist singularity, and says so) for ``blocked_rotate_s`` rotates the
-gripper first, as people do, and then translates on. A mode switch costs ``mode_switch_s`` without input; questions are answered truthfully
-(or wrongly with ``answer_error_rate``) after ``answer_delay_s``.
+not driving. A user whose arm refuses to move on the way to the pre-grasp point (the safety pipeline
+halts it, e.g. at a wrist singularity, and says so) for ``blocked_rotate_s`` rotates the gripper first,
+as people do, and then translates on. A mode switch costs ``mode_switch_s`` without input; questions are
+answered truthfully (or wrongly with ``answer_error_rate``) after ``answer_delay_s`` (or a uniform delay
+up to ``answer_delay_max_s``).
+
+Randomness comes from the ``rng`` given; the behaviours a profile switches on draw from it only when on,
+so the calibrated user's draws (and numbers) do not depend on them.
 """
 
 from __future__ import annotations
@@ -78,6 +83,18 @@ class SimulatedUser:
         self._errors_seen: deque[tuple[float, float]] = deque(maxlen=max(2, round(cfg.persist_window_s / dt)))
         approach = desired.rotation[:, 2]
         self.pregrasp = desired.position - cfg.pregrasp_standoff_m * approach
+        self._t = 0.0  # time since the first sample (s)
+        self._pause_left = cfg.start_pause_s
+        self._mid_pause_due = cfg.mid_pause_s > 0.0
+        self._start_dist: float | None = None
+        self._answer_delays: dict[int, float] = {}
+        self._close_m = cfg.close_translation_m
+        if cfg.close_translation_max_m is not None:  # this trial's closing tolerance
+            self._close_m = float(rng.uniform(cfg.close_translation_m, cfg.close_translation_max_m))
+        self._tremor_phase = rng.uniform(0.0, 2.0 * np.pi, 3) if cfg.tremor_std > 0.0 else np.zeros(3)
+        if cfg.order == "rotate_first":
+            self.phase, self._detour = Phase.ALIGN, True  # turn the gripper at the start, then translate
+            self.mode = Mode.ROTATION
 
     # -- perception --------------------------------------------------------------------------------------
 
@@ -88,9 +105,24 @@ class SimulatedUser:
         return err, float(np.linalg.norm(err)), float(quat_angle(self.desired.quat_wxyz, pose.quat_wxyz))
 
     def at_goal(self, pose: Pose) -> bool:
-        """Within the closing tolerance of the desired pose."""
+        """Within this user's closing tolerance of the desired pose (it closes the gripper there)."""
         d_t, d_r = pose.distance(self.desired)
-        return d_t <= self.cfg.close_translation_m and d_r <= self.cfg.close_rotation_rad
+        return d_t <= self._close_m and d_r <= self.cfg.close_rotation_rad
+
+    @property
+    def close_translation_m(self) -> float:
+        """This trial's closing tolerance (m): ``close_translation_m``, or drawn up to
+        ``close_translation_max_m``."""
+        return self._close_m
+
+    def answer_delay(self, qid: int) -> float:
+        """How long this user takes to answer question ``qid`` (s), drawn once per question."""
+        c = self.cfg
+        if c.answer_delay_max_s is None:
+            return c.answer_delay_s
+        if qid not in self._answer_delays:
+            self._answer_delays[qid] = float(self.rng.uniform(c.answer_delay_s, c.answer_delay_max_s))
+        return self._answer_delays[qid]
 
     # -- decisions ---------------------------------------------------------------------------------------
 
@@ -109,6 +141,10 @@ class SimulatedUser:
         commanded = sum(c for _, c in hist)
         stalled = len(hist) == hist.maxlen and hist[0][0] - n < self.cfg.persist_progress * commanded
         axes = err / n if stalled and n > 1e-9 else _saturate(gain * err, full * self.cfg.max_deflection) / full
+        if self.cfg.one_axis:  # one axis at a time: the one with the largest error
+            k = int(np.argmax(np.abs(axes)))
+            axes = np.where(np.arange(3) == k, axes, 0.0) * (np.linalg.norm(axes) / max(abs(axes[k]), 1e-12))
+            axes = np.clip(axes, -1.0, 1.0)
         hist.append((n, float(np.linalg.norm(axes)) * full * self.dt))
         return axes
 
@@ -135,21 +171,28 @@ class SimulatedUser:
         """The joystick sample for this instant; ``pose`` is the true current pose. While
         ``listening`` to a question the user keeps still; ``blocked`` says the arm refused the last
         command (a joint stage of the safety pipeline halted it, ``SafetyResult.refuses``)."""
+        t, self._t = self._t, self._t + self.dt
         self._blocked_s = self._blocked_s + self.dt if blocked else 0.0
         self._seen.append(pose)
         seen = self._seen[0]  # the oldest kept pose: ``reaction_delay_s`` ago
         if listening:
-            return UserInput(np.zeros(3), self.mode)
+            return self._still()
         if self.at_goal(pose):
             return UserInput(np.zeros(3), self.mode, close=True)
+        if self._pause_left > 1e-9 or self._mid_pause(seen):  # hesitating: hands off the stick
+            self._pause_left -= self.dt
+            return self._still()
         if self._switch_left > 0.0:
             self._switch_left -= self.dt
-            return UserInput(np.zeros(3), self.mode)
+            return self._still()
         self._update_phase(seen)
+        self._corrective_switch()
         if self._switch_left > 0.0:
             self._switch_left -= self.dt
-            return UserInput(np.zeros(3), self.mode)
+            return self._still()
         c = self.cfg
+        if c.burst_s > 0.0 and (t % (c.burst_s + c.burst_pause_s)) >= c.burst_s:
+            return self._still()  # between two bursts the stick is released
         if self.mode is Mode.TRANSLATION:
             err, _, _ = self._errors(seen)
             axes = self._push(err, c.linear_gain, self.scale.linear_scale_mps)
@@ -158,7 +201,33 @@ class SimulatedUser:
             axes = self._push(err, c.angular_gain, self.scale.angular_scale_radps)
         if c.noise_std > 0.0:
             axes = axes + self.rng.normal(0.0, c.noise_std, 3)
+        if c.tremor_std > 0.0:  # an oscillation of the hand on the stick, std tremor_std per axis
+            axes = axes + c.tremor_std * np.sqrt(2.0) * np.sin(2.0 * np.pi * c.tremor_hz * t + self._tremor_phase)
         return UserInput(np.clip(axes, -1.0, 1.0), self.mode)
+
+    def _still(self) -> UserInput:
+        """Hands off the stick, in the current mode."""
+        return UserInput(np.zeros(3), self.mode)
+
+    def _mid_pause(self, seen: Pose) -> bool:
+        """Start the one pause halfway to the pre-grasp point (``mid_pause_s``), if it is due."""
+        if not self._mid_pause_due or self.phase is not Phase.APPROACH:
+            return False
+        dist = float(np.linalg.norm(self.pregrasp - seen.position))
+        if self._start_dist is None:
+            self._start_dist = dist
+        if dist > 0.5 * self._start_dist:
+            return False
+        self._mid_pause_due = False
+        self._pause_left = self.cfg.mid_pause_s
+        return True
+
+    def _corrective_switch(self) -> None:
+        """Now and then (``corrective_switch_hz``) switch to the other mode to check it; the next decision
+        switches back. Two counted switches, each costing ``mode_switch_s``."""
+        rate = self.cfg.corrective_switch_hz
+        if rate > 0.0 and self._switch_left <= 0.0 and self.rng.random() < rate * self.dt:
+            self._switch(Mode.ROTATION if self.mode is Mode.TRANSLATION else Mode.TRANSLATION)
 
     def answer(self, target: str) -> bool:
         """Answer "is ``target`` your goal?" (truthful unless the error rate strikes)."""

@@ -1,0 +1,76 @@
+"""Markdown tables of a population suite's JSON (``sa-daemon eval --suite NAME --user ... --json FILE``), for
+``docs/results.md``:
+
+    python docs/results/report.py docs/results/suite-table1.json [...]
+
+Per (scene, task): one table, a row per user and method, with the 95 % intervals of time and input and the
+stars of policy's Holm-corrected paired difference from that method; then policy's ratios of time and
+joystick input to HO and to manual per user with their Holm p-values, and the questions per task beside
+the paper's where the suite has them. Prints to stdout.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from sa_daemon.sim.evaluate import format_summary
+from sa_daemon.sim.stats import stars
+from sa_daemon.sim.suites import SUITES
+
+
+def _p(c: dict | None) -> str:
+    if c is None or c["p_holm"] is None:
+        return "-"
+    return f"{c['p_holm']:.2g}{stars(c['p_holm'])}"
+
+
+def _ratio(a: float | None, b: float | None) -> str:
+    return "-" if a is None or b is None or b == 0 else f"{a / b:.2f}"
+
+
+def report(path: Path) -> str:
+    data = json.loads(path.read_text())
+    meta, rows, comps = data["meta"], data["summary"], data.get("comparisons", [])
+    s = SUITES.get(meta.get("suite") or "")
+    out = [(f"Suite `{meta.get('suite')}`: {meta['seeds']} seeds per cell, users {', '.join(meta['users'])}, "
+            f"{meta['arm']} arm; {len(data['trials'])} trials."), ""]
+    comp = {(c["scene"], c["task"], c["user"], c["baseline"], c["metric"]): c for c in comps}
+    for scene, task in dict.fromkeys((r["scene"], r["task"]) for r in rows):
+        group = [r for r in rows if r["scene"] == scene and r["task"] == task]
+        out += [f"#### {scene} `{task}`", "", format_summary(group, markdown=True, comparisons=comps, intervals=True),
+                ""]
+        methods = {r["method"] for r in group}
+        head = ["user"]
+        for base in ("ho", "manual"):
+            if base in methods and "policy" in methods:
+                head += [f"time / {base}", "p", f"input / {base}", "p"]
+        head += ["questions"]
+        if s is not None and s.paper_questions and task in s.paper_questions:
+            head += ["paper"]
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for user in dict.fromkeys(r["user"] for r in group):
+            by = {r["method"]: r for r in group if r["user"] == user}
+            pol = by.get("policy")
+            if pol is None:
+                continue
+            cells = [user]
+            for base in ("ho", "manual"):
+                if base in by:
+                    b = by[base]
+                    cells += [_ratio(pol["completion_time_s"], b["completion_time_s"]),
+                              _p(comp.get((scene, task, user, base, "completion_time_s"))),
+                              _ratio(pol["joystick_input"], b["joystick_input"]),
+                              _p(comp.get((scene, task, user, base, "joystick_input")))]
+            cells += [f"{pol['questions']:.2f}"]
+            if s is not None and s.paper_questions and task in s.paper_questions:
+                cells += [f"{s.paper_questions[task]:.2f}"]
+            lines.append("| " + " | ".join(cells) + " |")
+        out += lines + [""]
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    for f in sys.argv[1:]:
+        print(report(Path(f)))
