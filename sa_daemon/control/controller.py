@@ -282,10 +282,6 @@ class Controller:
         self.drop_plan()
         return q
 
-    def drop_question(self) -> Question | None:
-        q, self._question = self._question, None
-        return q
-
     # -- plans -------------------------------------------------------------------------------------------
 
     def snapshot(self, pose: Pose, budget_s: float | None, node_budget: int | None = None) -> Snapshot | None:

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..io.recorder import Recorder
+from ..io.server import ZmqServer
 from ..model.methods import method_spec
 from ..planner.worker import PlannerWorker, WorkerStatus
 from ..speech.speaker import PLAYER, PLAYER_PACKAGE, Speaker
@@ -49,9 +51,6 @@ def start_components(d: Daemon) -> None:
         "planner": FixedRate(1.0 / cfg.planner.period_s, spin_s=0.0, start=t0 + 0.5 * ctl),
         "publish": FixedRate(cfg.runtime.publish_hz, spin_s=0.0, start=t0 + 0.6 * ctl),
     }
-    from ..io.recorder import Recorder
-    from ..io.server import ZmqServer
-
     try:
         d.server = ZmqServer(opts.pub, opts.cmd, cfg.zmq.max_request_bytes, cfg.zmq.max_json_depth, curve=d.curve)
     except OSError as e:
