@@ -63,6 +63,10 @@ class HOConfig(_Section):
     rotation_cost_multiplier: float = Field(0.05, gt=0)
     translation_shrink_m: float = Field(0.02, gt=0, description="gradient shrinks linearly inside this (m)")
     rotation_shrink_rad: float = Field(math.pi / 12, gt=0, description="gradient shrinks inside this (rad)")
+    generator: Literal["gradient", "moves"] = Field(
+        "gradient",
+        description="per-goal twist HO averages: gradient = Javdani's -dQ/du; moves = the move-to-goal generator",
+    )
 
 
 class MoveConfig(_Section):
@@ -124,6 +128,21 @@ class PlannerConfig(_Section):
         5, ge=0, le=64, description="deepest chain of questions searched (the authors' HyP-DESPOT depth, 5)"
     )
     bound_levels: int = Field(3, ge=0, le=6, description="how far the solver refines its question bounds")
+    model: Literal["commit", "watch"] = Field(
+        "commit",
+        description="commit: moves end the search (H-step lookahead); watch: motion for watch_s, then the "
+        "predicted joystick evidence, then ask or move, over a horizon of horizon_s (docs/model.md)",
+    )
+    horizon_s: float = Field(5.0, gt=0, le=20, description="watch model: every plan is judged at this time (s)")
+    watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
+    watch_levels: int = Field(1, ge=0, le=1, description="watch model: 1 = a motion may be watched before deciding; 0 = no")
+    watch_moves: int = Field(
+        3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
+    )
+    rollout_step_s: float = Field(0.25, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
+    user_speed_tau_s: float = Field(
+        1.0, gt=0, description="time constant of the user's smoothed speed the predicted user twists use (s)"
+    )
 
 
 class InputConfig(_Section):

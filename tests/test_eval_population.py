@@ -19,14 +19,16 @@ from sa_daemon.sim.evaluate import (
     summarise,
 )
 from sa_daemon.sim.suites import SUITES, suite
+from sa_daemon.world.holding import OUTSIDE
 from sa_daemon.world.scene import load_scene
 
 
 def _trial(method: str, seed: int, time_s: float | None, success: bool = True, user: str = "calibrated",
-           task: str = "cup:top", questions: int = 0, failure: str = "") -> dict:
+           task: str = "cup:top", questions: int = 0, failure: str = "", kind: str = "") -> dict:
     """A hand-made trial record (the keys ``run_trial().metrics()`` has)."""
     return {"scene": "scene1", "task": task, "user": user, "method": method, "seed": seed, "success": success,
-            "failure": "" if success else (failure or "timeout"), "completion_time_s": time_s if success else 100.0,
+            "failure": "" if success else (failure or "timeout"),
+            "failure_kind": "" if success else (kind or "timeout"), "completion_time_s": time_s if success else 100.0,
             "mode_changes": 1, "joystick_input": 10.0 * (time_s or 0.0), "opposing_pct": 0.0,
             "correct_prediction": success, "questions": questions, "final_target_p": 1.0, "plans": 1}
 
@@ -36,7 +38,7 @@ def _trial(method: str, seed: int, time_s: float | None, success: bool = True, u
 
 def test_rows_are_per_user_with_intervals_and_failure_counts():
     trials = [_trial("policy", s, 10.0 + s) for s in range(6)]
-    trials += [_trial("policy", s, None, success=False, user="hasty", failure="the TCP is 0.02 m outside the object")
+    trials += [_trial("policy", s, None, success=False, user="hasty", failure="the TCP is 0.02 m outside the object", kind=OUTSIDE)
                for s in range(3)]
     trials += [_trial("policy", s, 12.0, user="hasty") for s in range(3, 6)]
     rows = summarise(trials)

@@ -14,7 +14,7 @@ import pytest
 
 from sa_daemon.arm.kinematic import KinematicArm
 from sa_daemon.geometry import Pose
-from sa_daemon.sim.success import grasp_outcome, scene_object
+from sa_daemon.sim.success import TIMEOUT, grasp_outcome, scene_object
 from sa_daemon.world.goals import GraspType
 from sa_daemon.world.grasps import (
     GRIPPER_MAX_OPENING_M,
@@ -22,7 +22,15 @@ from sa_daemon.world.grasps import (
     RIM_INSET_M,
     grasp_pose,
 )
-from sa_daemon.world.holding import HOLD_MARGIN_M, holds
+from sa_daemon.world.holding import (
+    HOLD_MARGIN_M,
+    OUTSIDE,
+    RIM_MISSED,
+    SLIPS,
+    TOO_WIDE,
+    WRONG_TYPE,
+    holds,
+)
 from sa_daemon.world.scene import SceneObject, builtin_scene_names, load_scene
 
 SCENES = builtin_scene_names()
@@ -144,16 +152,16 @@ def test_a_box_closed_along_its_long_axis_is_wider_than_the_open_fingers():
     tcp = [0.45, 0.0, 0.03]  # 2 cm below the top face, at the centre
     along = holds(BOX, grasp_pose(tcp, DOWN, [0.0, 1.0, 0.0]), GraspType.TOP)
     assert along.held is False
-    assert "wider than the open fingers" in along.reason
+    assert "wider than the open fingers" in along.reason and along.kind == TOO_WIDE
     across = holds(BOX, grasp_pose(tcp, DOWN, [1.0, 0.0, 0.0]), GraspType.TOP)
-    assert across.held is True and across.reason == ""
+    assert across.held is True and across.reason == "" and across.kind == ""
 
 
 def test_a_top_grasp_pose_classified_as_side_fails_on_its_grasp_type():
     side = grasp_pose([0.44, 0.0, 0.025], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])  # approach horizontal
     verdict = holds(BOX, side, GraspType.TOP)
     assert verdict.held is False
-    assert verdict.reason.startswith("grasp type")
+    assert verdict.reason.startswith("grasp type") and verdict.kind == WRONG_TYPE
     assert "side" in verdict.reason and "top" in verdict.reason
 
 
@@ -169,7 +177,7 @@ def test_a_cylinder_side_grasp_closing_off_its_axis_slips_beyond_the_friction_co
     verdict = holds(CAN, pose, GraspType.SIDE)
     assert verdict.held is held
     if not held:
-        assert "friction cone" in verdict.reason
+        assert "friction cone" in verdict.reason and verdict.kind == SLIPS
 
 
 CUP = _obj("cylinder", (0.04, 0.10), (0.45, 0.0, 0.05), GraspType.TOP, rim=True)
@@ -185,7 +193,7 @@ def test_a_rim_grasp_holds_below_the_rim_inside_the_wall_and_not_above_it(angle)
     above = grasp_pose([wall[0], wall[1], RIM_Z + 0.01], DOWN, u)  # 1 cm above the rim
     verdict = holds(CUP, above, GraspType.TOP)
     assert verdict.held is False
-    assert "rim" in verdict.reason
+    assert "rim" in verdict.reason and verdict.kind == RIM_MISSED
 
 
 def test_a_rim_grasp_closing_along_the_wall_slips():
@@ -193,7 +201,7 @@ def test_a_rim_grasp_closing_along_the_wall_slips():
     wall = np.array([0.45, 0.0, 0.0]) + (CUP.size[0] - RIM_INSET_M) * u
     tangential = grasp_pose([wall[0], wall[1], RIM_Z - RIM_DEPTH_M], DOWN, [0.0, 1.0, 0.0])
     verdict = holds(CUP, tangential, GraspType.TOP)
-    assert verdict.held is False and "friction cone" in verdict.reason
+    assert verdict.held is False and "friction cone" in verdict.reason and verdict.kind == SLIPS
 
 
 def test_a_tcp_just_above_the_top_face_holds_within_the_pad_margin():
@@ -206,7 +214,7 @@ def test_a_tcp_beyond_the_pad_margin_above_a_box_does_not_hold():
     small = _obj("box", (0.05, 0.05, 0.05), (0.45, 0.0, 0.025), GraspType.TOP)
     above = grasp_pose([0.45, 0.0, 0.05 + 2.0 * HOLD_MARGIN_M], DOWN, [0.0, 1.0, 0.0])
     verdict = holds(small, above, GraspType.TOP)
-    assert verdict.held is False and "outside the object" in verdict.reason
+    assert verdict.held is False and "outside the object" in verdict.reason and verdict.kind == OUTSIDE
 
 
 # -- grasp_outcome ---------------------------------------------------------------------------------------
@@ -215,7 +223,7 @@ def test_a_tcp_beyond_the_pad_margin_above_a_box_does_not_hold():
 def test_grasp_outcome_without_a_close_is_a_timeout():
     scene = load_scene("scene1")
     outcome = grasp_outcome(scene, "cup:top", None)
-    assert outcome.success is False and outcome.reason == "timeout"
+    assert outcome.success is False and outcome.reason == "timeout" and outcome.kind == TIMEOUT
 
 
 @pytest.mark.parametrize("task", ["cup:top", "cup:side", "chips can:side", "bowl:top"])
@@ -228,11 +236,11 @@ def test_grasp_outcome_of_a_held_pose_succeeds_on_a_kinematic_arm(task):
         outcome = grasp_outcome(scene, task, pose, a)
         assert outcome.success is True and outcome.reason == ""
     missed = grasp_outcome(scene, task, _back(pose, 0.03), arm)
-    assert missed.success is False and missed.reason not in ("", "timeout")
+    assert missed.success is False and missed.reason not in ("", "timeout") and missed.kind == OUTSIDE
 
 
 def test_grasp_outcome_refuses_a_held_pose_of_another_grasp_type():
     scene = load_scene("scene1")
     side_pose = scene.goal("cup:side").poses[0]
     outcome = grasp_outcome(scene, "cup:top", side_pose, KinematicArm(scene.start))
-    assert outcome.success is False and outcome.reason.startswith("grasp type")
+    assert outcome.success is False and outcome.reason.startswith("grasp type") and outcome.kind == WRONG_TYPE

@@ -21,6 +21,7 @@ from sa_daemon.arm.mujoco_arm import MujocoArm
 from sa_daemon.config import Config
 from sa_daemon.control.safety import SafetyCode, SafetyPipeline
 from sa_daemon.sim.episode import arm_factory, run_trial
+from sa_daemon.sim.success import NOT_LIFTED, grasp_outcome
 from sa_daemon.world.scene import load_scene
 
 
@@ -200,6 +201,16 @@ def test_closing_on_nothing_lifts_nothing(arm):
     arm.command_gripper(False)
     arm.step(0.6)
     assert np.all(arm.fingers > 0.04)
+
+
+def test_a_pose_that_holds_on_paper_fails_when_the_physical_gripper_lifts_nothing(scene1, arm):
+    """The geometric rule passes the cup's own grasp pose, but this arm closed at its start pose, so the
+    lift raises nothing and the outcome says so."""
+    pose = scene1.goal("cup:top").poses[0]
+    arm.command_gripper(True)
+    outcome = grasp_outcome(scene1, "cup:top", pose, arm)
+    assert outcome.success is False and outcome.kind == NOT_LIFTED
+    assert "raised nothing" in outcome.reason
 
 
 # -- evaluation ----------------------------------------------------------------------------------------

@@ -106,6 +106,8 @@ class Controller:
         self._axes = np.zeros(3)
         self._t_input = -math.inf
         self._input_seq = 0
+        self._speed = np.zeros(2)  # smoothed user speed (m/s, rad/s)
+        self._t_speed = -math.inf
         self._assist = True
         self._gripper_closed = False
         self._last = IDLE_TICK
@@ -187,6 +189,12 @@ class Controller:
         """The user's twist (m/s, rad/s) of the last sample in the current mode."""
         return axes_to_twist(self._axes, self._mode, self._cfg.input)
 
+    @property
+    def user_speed(self) -> tuple[float, float]:
+        """The user's smoothed speed ``(linear m/s, angular rad/s)``: each an exponential average, time
+        constant ``planner.user_speed_tau_s``, of the twist's norm over the belief ticks in its mode."""
+        return float(self._speed[0]), float(self._speed[1])
+
     def input_fresh(self, t: float) -> bool:
         """An input sample arrived within ``safety.stale_command_s`` of ``t``."""
         return t - self._t_input <= self._cfg.safety.stale_command_s
@@ -249,7 +257,13 @@ class Controller:
         ``True`` if the belief was updated. Resampling may replace the goal set (see :meth:`tick`)."""
         if not self.input_fresh(t):
             return False
-        self._belief = self._model.update_input(self._belief, pose, self.user_twist)
+        u = self.user_twist
+        self._belief = self._model.update_input(self._belief, pose, u)
+        dt = min(max(t - self._t_speed, 0.0), 0.1)  # (a tick after a gap weighs as 0.1 s)
+        self._t_speed = t
+        k = 1.0 - math.exp(-dt / self._cfg.planner.user_speed_tau_s)
+        i = 0 if self._mode is Mode.TRANSLATION else 1
+        self._speed[i] += k * (float(np.linalg.norm(u[3 * i:3 * i + 3])) - self._speed[i])
         return True
 
     # -- questions ---------------------------------------------------------------------------------------
@@ -292,7 +306,7 @@ class Controller:
             return None
         b = self._belief
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
-                        self._method, budget_s=budget_s, node_budget=node_budget)
+                        self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed)
         self._issued[snap] = self._task
         return snap
 
@@ -345,6 +359,8 @@ class Controller:
         self._asked.clear()
         self._question = None
         self.drop_plan()
+        self._speed = np.zeros(2)
+        self._t_speed = -math.inf
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
         self._safety.resume()

@@ -59,20 +59,29 @@ def q_minus_v(
     ``goal_positions`` is ``(G, K, 3)``; the goal's ``V`` and ``Q`` come from its lowest-value pose.
     Returns shape ``(G,)``.
     """
+    gp, gq = nearest_goal_poses(position, quat, goal_positions, goal_quats, cfg)
+    return q_minus_v_at(position, quat, user_twist, gp, gq, cfg)
+
+
+def q_minus_v_at(
+    position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
+    goal_quats: FloatArray, cfg: IntentConfig,
+) -> FloatArray:
+    """``Q_g(x, u) - V_g(x)`` against one pose per goal, ``(G, 3)``/``(G, 4)``, for poses ``(..., 3)``,
+    ``(..., 4)`` and twists ``(..., 6)``: shape ``(..., G)``. ``Q`` applies ``u`` for
+    ``action_apply_time_s`` and adds that time times the slope of ``V`` (the step cost)."""
     T = cfg.action_apply_time_s
+    position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     diff = goal_positions - position
-    d_t = np.sqrt(np.sum(diff * diff, axis=-1))  # (G, K)
+    d_t = np.sqrt(np.sum(diff * diff, axis=-1))
     d_r = quat_angle(goal_quats, quat)
     v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
-    k = np.argmin(v, axis=-1)  # lowest-value pose per goal
-    rows = np.arange(v.shape[0])
-    p1, q1 = integrate_pose(position, quat, user_twist, T)
-    gp, gq = goal_positions[rows, k], goal_quats[rows, k]
-    d_t1 = np.sqrt(np.sum((gp - p1) ** 2, axis=-1))
-    d_r1 = quat_angle(gq, q1)
-    cost = T * (huber_slope(d_t[rows, k], cfg.translation) + huber_slope(d_r[rows, k], cfg.rotation))
+    p1, q1 = integrate_pose(position, quat, np.asarray(user_twist)[..., None, :], T)
+    d_t1 = np.sqrt(np.sum((goal_positions - p1) ** 2, axis=-1))
+    d_r1 = quat_angle(goal_quats, q1)
+    cost = T * (huber_slope(d_t, cfg.translation) + huber_slope(d_r, cfg.rotation))
     q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
-    return q_val - v[rows, k]
+    return q_val - v
 
 
 def assistance_twists(
@@ -113,11 +122,18 @@ def goal_gradients(
     ``position`` may carry leading batch axes ``(B, 3)`` to evaluate many candidate poses at once.
     """
     p1, q1 = integrate_pose(position, quat, user_twist, intent.action_apply_time_s)
-    p1 = p1[..., None, :]
-    q1 = q1[..., None, :]
-    if goal_positions.ndim == 3:  # (G, K, .): pick each goal's lowest-value pose
-        v = pose_values(p1[..., None, :], q1[..., None, :], goal_positions, goal_quats, intent)
-        k = np.argmin(v, axis=-1)
-        rows = np.arange(goal_positions.shape[0])
-        goal_positions, goal_quats = goal_positions[rows, k], goal_quats[rows, k]
-    return assistance_twists(p1, q1, goal_positions, goal_quats, intent, ho)
+    goal_positions, goal_quats = nearest_goal_poses(p1, q1, goal_positions, goal_quats, intent)
+    return assistance_twists(p1[..., None, :], q1[..., None, :], goal_positions, goal_quats, intent, ho)
+
+
+def nearest_goal_poses(
+    position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig
+) -> tuple[FloatArray, FloatArray]:
+    """Each goal's lowest-value pose from ``position`` ``(3,)`` / ``quat`` ``(4,)``: ``(G, 3)``, ``(G, 4)``.
+    Goal arrays that are already one pose per goal, ``(G, 3)``/``(G, 4)``, come back unchanged."""
+    if goal_positions.ndim != 3:
+        return goal_positions, goal_quats
+    v = pose_values(position[..., None, None, :], quat[..., None, None, :], goal_positions, goal_quats, cfg)
+    k = np.argmin(v, axis=-1)
+    rows = np.arange(goal_positions.shape[0])
+    return goal_positions[rows, k], goal_quats[rows, k]

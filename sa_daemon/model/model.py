@@ -20,10 +20,9 @@ from ..geometry import FloatArray, Pose, quat_angle
 from ..world.goalset import GoalSet
 from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
-from .huber import goal_gradients
 from .methods import MethodSpec, method_spec
 from .reward import opposes
-from .twists import blend, ho_twist, move_twist
+from .twists import blend, ho_goal_twists, ho_twist, move_twist
 
 ZERO_TWIST = np.zeros(6)
 
@@ -141,10 +140,8 @@ class SharedAutonomyModel:
             kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
             return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
         if action.kind is ActionKind.HO:
-            grads = goal_gradients(
-                pose.position, pose.quat_wxyz, user_twist, goals.positions, goals.quats_wxyz,
-                self.cfg.intent, self.cfg.ho,
-            )
+            grads = ho_goal_twists(pose.position, pose.quat_wxyz, user_twist, goals.positions,
+                                   goals.quats_wxyz, self.cfg)
             return ho_twist(np.asarray(probs), grads)
         return ZERO_TWIST.copy()
 

@@ -2,7 +2,9 @@
 
 * move-to-goal ``g``: proportional twist toward ``k_c``, saturated (translation along ``k_c - x``, rotation
   along the axis-angle of the relative rotation);
-* HO: the belief-weighted negative gradient of the goals' ``Q`` (:mod:`.huber`);
+* HO: the belief-weighted mean of one twist per goal: the negative gradient of the goal's ``Q``
+  (:mod:`.huber`, ``ho.generator = "gradient"``, Javdani et al.) or the goal's move-to-goal twist
+  (``"moves"``: the same kind of generator per goal as the move actions, Fig. 1);
 * no-assist: zero robot twist, the user's twist passes unscaled;
 * question: the robot holds still while the question is asked.
 
@@ -14,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import BlendConfig, InputConfig, MoveConfig
-from ..geometry import FloatArray, rotation_error
+from ..config import BlendConfig, Config, InputConfig, MoveConfig
+from ..geometry import FloatArray, integrate_pose, rotation_error
 from .actions import Mode
+from .huber import goal_gradients, nearest_goal_poses
 
 
 def mask_to_mode(twist: FloatArray, mode: Mode) -> FloatArray:
@@ -54,6 +57,38 @@ def move_twist(
     lin = _clip_norm(cfg.linear_gain * (np.asarray(goal_position) - position), cfg.linear_max_mps)
     ang = _clip_norm(cfg.angular_gain * rotation_error(goal_quat, quat), cfg.angular_max_radps)
     return np.concatenate((lin, ang), axis=-1)
+
+
+def ho_goal_twists(
+    position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
+    goal_quats: FloatArray, cfg: Config,
+) -> FloatArray:
+    """The per-goal twists HO averages (m/s, rad/s), ``(..., G, 6)``, by ``cfg.ho.generator``.
+
+    ``"gradient"``: ``-dQ_g/du`` at the pose after the user's twist (:func:`.huber.goal_gradients`);
+    ``"moves"``: :func:`move_twist` toward each goal, from the pose after the user's twist likewise.
+    Goal arrays are ``(G, K, ...)`` (each goal's lowest-value pose) or ``(G, ...)`` (one pose per goal).
+    """
+    if cfg.ho.generator == "gradient":
+        return goal_gradients(position, quat, user_twist, goal_positions, goal_quats, cfg.intent, cfg.ho)
+    p1, q1 = integrate_pose(position, quat, user_twist, cfg.intent.action_apply_time_s)
+    gp, gq = nearest_goal_poses(p1, q1, goal_positions, goal_quats, cfg.intent)
+    return move_twist(p1[..., None, :], q1[..., None, :], gp, gq, cfg.move)
+
+
+def user_twist_toward(
+    position: FloatArray, quat: FloatArray, goal_position: FloatArray, goal_quat: FloatArray, mode: Mode,
+    speed: tuple[float, float],
+) -> FloatArray:
+    """The twist of a user heading to a goal pose (m/s, rad/s), broadcasting like :func:`move_twist`: in
+    the current ``mode`` only, along the error at the user's ``speed`` (linear m/s, angular rad/s),
+    slowing within one second of the goal (gain 1/s, saturated at the speed). The watch model's
+    prediction of the joystick (``docs/model.md``)."""
+    if Mode(mode) is Mode.TRANSLATION:
+        lin = _clip_norm(np.asarray(goal_position) - position, speed[0])
+        return np.concatenate((lin, np.zeros_like(lin)), axis=-1)
+    ang = _clip_norm(rotation_error(goal_quat, quat), speed[1])
+    return np.concatenate((np.zeros_like(ang), ang), axis=-1)
 
 
 def ho_twist(weights: FloatArray, gradients: FloatArray) -> FloatArray:

@@ -26,10 +26,9 @@ import numpy as np
 
 from ..geometry import FloatArray, integrate_pose, quat_angle
 from ..model.actions import Action, ActionKind
-from ..model.huber import goal_gradients
 from ..model.model import SharedAutonomyModel
 from ..model.reward import distance_reward, opposes, opposition_reward
-from ..model.twists import blend, ho_twist, move_twist
+from ..model.twists import blend, ho_goal_twists, ho_twist, move_twist
 from .snapshot import Snapshot
 
 
@@ -72,9 +71,7 @@ class Problem:
                 pos[self._is_goal], quat[self._is_goal], self._gp, self._gq, cfg.move
             )
         if self._ho >= 0:
-            grads = goal_gradients(
-                pos[self._ho], quat[self._ho], self.u, self.kp, self.kq, cfg.intent, cfg.ho
-            )
+            grads = ho_goal_twists(pos[self._ho], quat[self._ho], self.u, self.kp, self.kq, cfg)
             out[self._ho] = ho_twist(self.b0, grads)
         return out
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,7 +18,8 @@ class Snapshot:
     """Everything the planner needs, frozen at one instant.
 
     ``user_twist`` is the user's last commanded twist (m/s, rad/s), already holding only the components of
-    ``mode``; ``asked`` the high-level targets already asked about in this task. ``budget_s`` is the
+    ``mode``; ``user_speed`` the user's smoothed speed ``(linear m/s, angular rad/s)``, which the watch
+    model's predicted user twists use (``None``: the norms of ``user_twist``); ``asked`` the high-level targets already asked about in this task. ``budget_s`` is the
     wall-clock deadline (``None``: no deadline) and ``node_budget`` a deterministic cap on expanded
     beliefs (``None``: none); with both ``None`` the planner runs to the proven optimum.
     """
@@ -31,6 +33,7 @@ class Snapshot:
     method: str = "policy"
     budget_s: float | None = 0.1
     node_budget: int | None = None
+    user_speed: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.goals, GoalSet):
@@ -45,6 +48,13 @@ class Snapshot:
         object.__setattr__(self, "user_twist", u)
         object.__setattr__(self, "mode", Mode(self.mode))
         object.__setattr__(self, "asked", frozenset(self.asked))
+        if self.user_speed is None:
+            speed = (float(np.linalg.norm(u[:3])), float(np.linalg.norm(u[3:])))
+        else:
+            speed = tuple(float(v) for v in self.user_speed)
+            if len(speed) != 2 or not all(math.isfinite(v) and v >= 0 for v in speed):
+                raise ValueError("user_speed must be two finite, non-negative numbers (m/s, rad/s)")
+        object.__setattr__(self, "user_speed", speed)
 
     def to_dict(self) -> dict:
         """Plain (JSON-ready) form."""
@@ -58,6 +68,7 @@ class Snapshot:
             "method": self.method,
             "budget_s": self.budget_s,
             "node_budget": self.node_budget,
+            "user_speed": list(self.user_speed),
         }
 
     @classmethod
@@ -72,6 +83,7 @@ class Snapshot:
             method=d["method"],
             budget_s=d["budget_s"],
             node_budget=d["node_budget"],
+            user_speed=d.get("user_speed"),
         )
 
 

@@ -30,6 +30,7 @@ from ..model.methods import method_spec
 from ..model.model import SharedAutonomyModel
 from .problem import Problem
 from .snapshot import PlanResult, Snapshot
+from .watch import plan_watch
 
 
 class _Stop(Exception):
@@ -238,6 +239,8 @@ class Solver:
         if not spec.planned:
             act = self.model.fixed_action(snap.method, snap.goals, snap.probs)
             return PlanResult(act, math.nan, math.nan, 0, 0, (time.perf_counter() - t0) * 1e3, True)
+        if self.model.cfg.planner.model == "watch":
+            return plan_watch(self.model, snap)
         deadline = t0 + snap.budget_s if snap.budget_s is not None else math.inf
         prob = Problem(self.model, snap)
         s = _Search(prob, deadline, snap.node_budget, self.model.cfg.planner.bound_levels)

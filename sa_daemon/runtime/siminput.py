@@ -69,10 +69,10 @@ class SimInput:
         assert self.user is not None
         return self.user.answer(target)
 
-    def answer_delay(self, qid: int) -> float:
-        """How long the user takes to answer question ``qid`` (s)."""
+    def answers_by(self, qid: int, asked_at: float, t: float) -> bool:
+        """Whether the user has answered question ``qid``, asked at ``asked_at``, by ``t`` (s)."""
         assert self.user is not None
-        return self.user.answer_delay(qid)
+        return self.user.answers_by(qid, asked_at, t)
 
     def outcome(self, closed_at: Pose | None) -> Outcome:
         """The task's outcome with the gripper closed at ``closed_at`` (``None``: it timed out): the

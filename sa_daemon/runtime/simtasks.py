@@ -53,7 +53,7 @@ class SimTasks:
             return
         pose = d.arm_state.pose
         q = d.ctl.question
-        if q is not None and mono - q.asked_at >= sim.answer_delay(q.qid):
+        if q is not None and sim.answers_by(q.qid, q.asked_at, mono):
             d.asker.answer(sim.answer(q.target), source="sim")
         s = sim.sample(pose, listening=d.ctl.question is not None, blocked=d.ctl.last.refused)
         timed_out = d.now() - sim.task_started > d.cfg.sim_user.timeout_s
@@ -62,7 +62,7 @@ class SimTasks:
             if s.close:
                 d.set_gripper(True)
             outcome = sim.outcome(pose if s.close else None)
-            done = {"task": sim.task, "success": outcome.success, "failure": outcome.reason,
+            done = {"task": sim.task, "success": outcome.success, "failure": outcome.reason, "failure_kind": outcome.kind,
                     "time_s": round(d.now() - sim.task_started, 3), "questions": len(d.ctl.asked),
                     "timed_out": timed_out and not s.close}
             self.done.append(done)

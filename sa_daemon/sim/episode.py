@@ -82,7 +82,8 @@ class TrialResult:
     plans: int
     targets: list[str] = field(default_factory=list)
     timeline: Timeline | None = None
-    failure: str = ""  # why it failed (sim/success.py); "" for a success
+    failure: str = ""  # why it failed, with numbers (sim/success.py); "" for a success
+    failure_kind: str = ""  # the same as one of sim.success.FAILURES, for counting
     user: str = "calibrated"  # the simulated user's profile (sim/users.py)
 
     def metrics(self) -> dict:
@@ -90,7 +91,8 @@ class TrialResult:
         return {
             k: getattr(self, k)
             for k in (
-                "scene", "task", "user", "method", "seed", "success", "failure", "completion_time_s", "mode_changes",
+                "scene", "task", "user", "method", "seed", "success", "failure", "failure_kind",
+                "completion_time_s", "mode_changes",
                 "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
             )
         }
@@ -183,7 +185,7 @@ def run_trial(
         ctl.update_belief(state.pose, t)
         answered = False
         q = ctl.question
-        if q is not None and t - q.asked_at >= user.answer_delay(q.qid) - 1e-9:
+        if q is not None and user.answers_by(q.qid, q.asked_at, t):
             ctl.on_answer(user.answer(q.target), t)
             answered = True  # re-plan now, with the answer
         if step % plan_every == 0 or answered:
@@ -222,6 +224,7 @@ def run_trial(
         seed=seed,
         success=outcome.success,
         failure=outcome.reason,
+        failure_kind=outcome.kind,
         user=user_name,
         completion_time_s=round(elapsed, 6),
         mode_changes=metrics.mode_changes([Mode.TRANSLATION.value] + modes),

@@ -170,8 +170,8 @@ def summarise(trials: list[dict]) -> list[dict]:
         failures: dict[str, int] = {}
         for t in ts:
             if not t["success"]:
-                reason = _failure_kind(t.get("failure", ""))
-                failures[reason] = failures.get(reason, 0) + 1
+                kind = t.get("failure_kind") or "unknown"  # (records from before issue 15 have none)
+                failures[kind] = failures.get(kind, 0) + 1
         row["failures"] = failures
         row["ci95"] = ci
         out.append(row)
@@ -181,22 +181,6 @@ def summarise(trials: list[dict]) -> list[dict]:
 def _ci(vals: list[float]) -> list[float] | None:
     ci = stats.bootstrap_ci(vals)
     return None if ci is None else [ci[0], ci[1]]
-
-
-_FAILURE_KINDS = (
-    ("timeout", "timeout"), ("grasp type", "wrong grasp type"), ("the lift test", "not lifted"),
-    ("outside the object", "closed outside the object"), ("wider than the open fingers", "not between the fingers"),
-    ("friction cone", "would slip"), ("below the TCP", "rim not in the fingers"),
-    ("beyond the half opening", "rim not in the fingers"), ("misses the object", "closed outside the object"),
-)
-
-
-def _failure_kind(reason: str) -> str:
-    """A failure reason (``sim/success.py``) without its numbers, for counting."""
-    for marker, kind in _FAILURE_KINDS:
-        if marker in reason:
-            return kind
-    return reason or "unknown"
 
 
 def compare(trials: list[dict], method: str = "policy", metrics: tuple[str, ...] = COMPARED) -> list[dict]:

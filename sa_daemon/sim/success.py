@@ -13,16 +13,24 @@ from dataclasses import dataclass
 
 from ..arm.base import Arm
 from ..geometry import Pose
-from ..world.holding import holds
+from ..world.holding import HOLD_FAILURES, WRONG_TYPE, holds
 from ..world.scene import Scene, SceneObject
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """``success`` and, for a failure, why (``timeout``, ``grasp type ...``, ``the TCP is ... outside``, ...)."""
+    """``success`` and, for a failure, why: ``kind`` (one of :data:`FAILURES`, for counting) and ``reason``
+    (with its numbers, for reading: ``the TCP is 0.012 m outside the object``)."""
 
     success: bool
     reason: str = ""
+    kind: str = ""
+
+
+TIMEOUT = "timeout"
+NOT_LIFTED = "not lifted"
+FAILURES = (TIMEOUT, *HOLD_FAILURES, NOT_LIFTED)
+"""Every ``Outcome.kind`` of a failed trial."""
 
 
 def scene_object(scene: Scene, name: str) -> SceneObject:
@@ -37,15 +45,15 @@ def grasp_outcome(scene: Scene, task: str, closed_at: Pose | None, arm: Arm | No
     the time ran out). ``arm``: lifted with its ``lift_test`` if it has one (call it when the trial is over:
     it moves the arm)."""
     if closed_at is None:
-        return Outcome(False, "timeout")
+        return Outcome(False, "timeout", TIMEOUT)
     goal = scene.goal(task)
     verdict = holds(scene_object(scene, goal.object), closed_at, goal.grasp_type)
     lift_test = getattr(arm, "lift_test", None)
     if not callable(lift_test):
-        return Outcome(verdict.held, verdict.reason)
-    if verdict.reason.startswith("grasp type"):  # physics cannot tell a side grasp from a top grasp
-        return Outcome(False, verdict.reason)
+        return Outcome(verdict.held, verdict.reason, verdict.kind)
+    if verdict.kind == WRONG_TYPE:  # physics cannot tell a side grasp from a top grasp
+        return Outcome(False, verdict.reason, verdict.kind)
     lifted = lift_test()
     if lifted != goal.object:
-        return Outcome(False, f"the lift test raised {lifted or 'nothing'}, not the {goal.object}")
+        return Outcome(False, f"the lift test raised {lifted or 'nothing'}, not the {goal.object}", NOT_LIFTED)
     return Outcome(True)

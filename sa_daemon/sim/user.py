@@ -124,6 +124,11 @@ class SimulatedUser:
             self._answer_delays[qid] = float(self.rng.uniform(c.answer_delay_s, c.answer_delay_max_s))
         return self._answer_delays[qid]
 
+    def answers_by(self, qid: int, asked_at: float, t: float) -> bool:
+        """Whether this user has answered question ``qid``, asked at ``asked_at`` (s), by time ``t`` (s):
+        the evaluation and the daemon's simulated input both ask this (1 ns tolerance for float steps)."""
+        return t - asked_at >= self.answer_delay(qid) - 1e-9
+
     # -- decisions ---------------------------------------------------------------------------------------
 
     def _switch(self, mode: Mode) -> None:

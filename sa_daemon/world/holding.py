@@ -55,10 +55,21 @@ _FINE = {GraspType.TOP_HORIZONTAL, GraspType.TOP_VERTICAL, GraspType.SIDE_HORIZO
 
 @dataclass(frozen=True)
 class Hold:
-    """The verdict: ``held``, and when not, the first rule that failed (``reason``)."""
+    """The verdict: ``held``, and when not, the first rule that failed: ``kind`` (one of
+    :data:`HOLD_FAILURES`, for counting) and ``reason`` (the same with its numbers, for reading)."""
 
     held: bool
     reason: str = ""
+    kind: str = ""
+
+
+WRONG_TYPE = "wrong grasp type"
+OUTSIDE = "closed outside the object"
+TOO_WIDE = "not between the fingers"
+SLIPS = "would slip"
+RIM_MISSED = "rim not in the fingers"
+HOLD_FAILURES = (WRONG_TYPE, OUTSIDE, TOO_WIDE, SLIPS, RIM_MISSED)
+"""Every ``Hold.kind`` of a failed hold."""
 
 
 def _to_object(obj: SceneObject, p: FloatArray) -> FloatArray:
@@ -183,7 +194,7 @@ def holds(obj: SceneObject, pose: Pose, grasp_type: GraspType, margin_m: float =
     """The rule of the module doc for a gripper closed at ``pose`` on ``obj`` with ``grasp_type``."""
     got = classify_grasp(pose, fine=grasp_type in _FINE)
     if got is not grasp_type:
-        return Hold(False, f"grasp type {got.value if got else 'none'}, not {grasp_type.value}")
+        return Hold(False, f"grasp type {got.value if got else 'none'}, not {grasp_type.value}", WRONG_TYPE)
     q = _to_object(obj, pose.position)
     closing = _dir_to_object(obj, pose.rotation[:, 1])
     top = grasp_type in (GraspType.TOP, GraspType.TOP_HORIZONTAL, GraspType.TOP_VERTICAL)
@@ -191,27 +202,28 @@ def holds(obj: SceneObject, pose: Pose, grasp_type: GraspType, margin_m: float =
         wall = abs(math.hypot(q[0], q[1]) - obj.size[0])
         depth = obj.size[1] / 2.0 - q[2]  # below the rim
         if wall > opening_m / 2.0:
-            return Hold(False, f"the rim is {wall:.3f} m from the TCP, beyond the half opening")
+            return Hold(False, f"the rim is {wall:.3f} m from the TCP, beyond the half opening", RIM_MISSED)
         if not -margin_m <= depth <= FINGER_LENGTH_M:
-            return Hold(False, f"the rim is {depth:.3f} m below the TCP, outside the finger pads")
+            return Hold(False, f"the rim is {depth:.3f} m below the TCP, outside the finger pads", RIM_MISSED)
         r = math.hypot(q[0], q[1])
         if r > 1e-9 and _slips(closing, np.array([q[0] / r, q[1] / r, 0.0])):
-            return Hold(False, "the fingers pinch the wall outside the friction cone")
+            return Hold(False, "the fingers pinch the wall outside the friction cone", SLIPS)
         return Hold(True)
     out = _outside_by(obj, q)
     if out > margin_m:
-        return Hold(False, f"the TCP is {out:.3f} m outside the object")
+        return Hold(False, f"the TCP is {out:.3f} m outside the object", OUTSIDE)
     q = _nearest_inside(obj, q)  # within the margin: the pads close through the nearest part of the object
     chord = _chord(obj, q, closing)
     if chord is None:  # (only possible within the margin, just outside)
-        return Hold(False, "the closing axis misses the object")
+        return Hold(False, "the closing axis misses the object", OUTSIDE)
     s0, s1, n0, n1 = chord
     if s1 - s0 > opening_m + 1e-9:
-        return Hold(False, f"the object spans {s1 - s0:.3f} m along the closing axis: wider than the open fingers")
+        return Hold(False, f"the object spans {s1 - s0:.3f} m along the closing axis: wider than the open fingers",
+                        TOO_WIDE)
     for s_end, n in ((s0, n0), (s1, n1)):
         normals = [n, *_edge_normals(obj, q + s_end * closing, PAD_HALF_M)]
         if all(_slips(closing, m) for m in normals):
-            return Hold(False, "a contact is outside the friction cone: the object would slip out")
+            return Hold(False, "a contact is outside the friction cone: the object would slip out", SLIPS)
     return Hold(True)
 
 
