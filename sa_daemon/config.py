@@ -140,6 +140,10 @@ class PlannerConfig(_Section):
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
     rollout_step_s: float = Field(0.25, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
+    user_standoff_m: float = Field(
+        0.06, ge=0, le=0.3,
+        description="watch model: the predicted user translates to this far behind a grasp along its approach first (m)",
+    )
     user_speed_tau_s: float = Field(
         1.0, gt=0, description="time constant of the user's smoothed speed the predicted user twists use (s)"
     )

@@ -94,15 +94,26 @@ def assistance_twists(
     ``(..., G, 4)``; returns ``(..., G, 6)``. Magnitude: the Huber slope divided by the robot's cost
     multiplier, shrunk linearly inside ``translation_shrink_m`` / ``rotation_shrink_rad``.
     """
+    return np.concatenate((assistance_linear(position, goal_positions, intent, ho),
+                           assistance_angular(quat, goal_quats, intent, ho)), axis=-1)
+
+
+def assistance_linear(position: FloatArray, goal_positions: FloatArray, intent: IntentConfig, ho: HOConfig) -> FloatArray:
+    """The linear part of :func:`assistance_twists` (m/s), broadcasting like it."""
     diff = goal_positions - position
     d_t = np.sqrt(np.sum(diff * diff, axis=-1))
-    axis = rotation_error(goal_quats, quat)  # |axis| = d_r
-    d_r = np.sqrt(np.sum(axis * axis, axis=-1))
     lin_mag = huber_slope(d_t, intent.translation) / ho.translation_cost_multiplier
     lin_mag = lin_mag * np.minimum(1.0, d_t / ho.translation_shrink_m) / np.maximum(d_t, 1e-12)
+    return diff * lin_mag[..., None]
+
+
+def assistance_angular(quat: FloatArray, goal_quats: FloatArray, intent: IntentConfig, ho: HOConfig) -> FloatArray:
+    """The angular part of :func:`assistance_twists` (rad/s), broadcasting like it."""
+    axis = rotation_error(goal_quats, quat)  # |axis| = d_r
+    d_r = np.sqrt(np.sum(axis * axis, axis=-1))
     rot_mag = huber_slope(d_r, intent.rotation) / ho.rotation_cost_multiplier
     rot_mag = rot_mag * np.minimum(1.0, d_r / ho.rotation_shrink_rad) / np.maximum(d_r, 1e-12)
-    return np.concatenate((diff * lin_mag[..., None], axis * rot_mag[..., None]), axis=-1)
+    return axis * rot_mag[..., None]
 
 
 def goal_gradients(

@@ -19,7 +19,12 @@ import numpy as np
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
 from ..geometry import FloatArray, integrate_pose, rotation_error
 from .actions import Mode
-from .huber import goal_gradients, nearest_goal_poses
+from .huber import (
+    assistance_angular,
+    assistance_linear,
+    goal_gradients,
+    nearest_goal_poses,
+)
 
 
 def mask_to_mode(twist: FloatArray, mode: Mode) -> FloatArray:
@@ -42,7 +47,8 @@ def axes_to_twist(axes: FloatArray, mode: Mode, scale: InputConfig) -> FloatArra
     return t
 
 
-def _clip_norm(v: FloatArray, limit: float) -> FloatArray:
+def clip_norm(v: FloatArray, limit: float) -> FloatArray:
+    """``v`` scaled down, along its last axis, to a norm of at most ``limit``."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v * np.minimum(1.0, limit / np.maximum(n, 1e-12))
 
@@ -54,9 +60,17 @@ def move_twist(
 
     Broadcasts, so many (pose, goal) pairs are computed in one call.
     """
-    lin = _clip_norm(cfg.linear_gain * (np.asarray(goal_position) - position), cfg.linear_max_mps)
-    ang = _clip_norm(cfg.angular_gain * rotation_error(goal_quat, quat), cfg.angular_max_radps)
-    return np.concatenate((lin, ang), axis=-1)
+    return np.concatenate((move_linear(position, goal_position, cfg), move_angular(quat, goal_quat, cfg)), axis=-1)
+
+
+def move_linear(position: FloatArray, goal_position: FloatArray, cfg: MoveConfig) -> FloatArray:
+    """The linear part of :func:`move_twist` (m/s): it depends on the position alone."""
+    return clip_norm(cfg.linear_gain * (np.asarray(goal_position) - position), cfg.linear_max_mps)
+
+
+def move_angular(quat: FloatArray, goal_quat: FloatArray, cfg: MoveConfig) -> FloatArray:
+    """The angular part of :func:`move_twist` (rad/s): it depends on the orientation alone."""
+    return clip_norm(cfg.angular_gain * rotation_error(goal_quat, quat), cfg.angular_max_radps)
 
 
 def ho_goal_twists(
@@ -76,19 +90,58 @@ def ho_goal_twists(
     return move_twist(p1[..., None, :], q1[..., None, :], gp, gq, cfg.move)
 
 
+def ho_goal_linear(position: FloatArray, goal_positions: FloatArray, cfg: Config) -> FloatArray:
+    """The linear part of :func:`ho_goal_twists` for one pose per goal, ``(..., G, 3)`` (m/s), from
+    ``position`` ``(..., 3)`` already moved by the user's twist: it depends on the position alone."""
+    if cfg.ho.generator == "gradient":
+        return assistance_linear(position[..., None, :], goal_positions, cfg.intent, cfg.ho)
+    return move_linear(position[..., None, :], goal_positions, cfg.move)
+
+
+def ho_goal_angular(quat: FloatArray, goal_quats: FloatArray, cfg: Config) -> FloatArray:
+    """The angular part of :func:`ho_goal_twists` for one pose per goal, ``(..., G, 3)`` (rad/s), from
+    ``quat`` ``(..., 4)`` already turned by the user's twist: it depends on the orientation alone."""
+    if cfg.ho.generator == "gradient":
+        return assistance_angular(quat[..., None, :], goal_quats, cfg.intent, cfg.ho)
+    return move_angular(quat[..., None, :], goal_quats, cfg.move)
+
+
 def user_twist_toward(
     position: FloatArray, quat: FloatArray, goal_position: FloatArray, goal_quat: FloatArray, mode: Mode,
-    speed: tuple[float, float],
+    speed: tuple[float, float], standoff_m: float = 0.0,
 ) -> FloatArray:
     """The twist of a user heading to a goal pose (m/s, rad/s), broadcasting like :func:`move_twist`: in
-    the current ``mode`` only, along the error at the user's ``speed`` (linear m/s, angular rad/s),
-    slowing within one second of the goal (gain 1/s, saturated at the speed). The watch model's
-    prediction of the joystick (``docs/model.md``)."""
+    the current ``mode`` only, at the user's ``speed`` (linear m/s, angular rad/s), slowing within one
+    second of its aim (gain 1/s, saturated at the speed). Translating, it aims at the pre-grasp point
+    ``standoff_m`` behind the goal along its approach axis while farther than 1.5 ``standoff_m`` from the
+    goal, then at the goal (:func:`user_linear`). The watch model's prediction of the joystick
+    (``docs/model.md``)."""
     if Mode(mode) is Mode.TRANSLATION:
-        lin = _clip_norm(np.asarray(goal_position) - position, speed[0])
+        lin = user_linear(position, goal_position, pregrasp_points(goal_position, goal_quat, standoff_m), speed[0],
+                          standoff_m)
         return np.concatenate((lin, np.zeros_like(lin)), axis=-1)
-    ang = _clip_norm(rotation_error(goal_quat, quat), speed[1])
+    ang = user_angular(quat, goal_quat, speed[1])
     return np.concatenate((np.zeros_like(ang), ang), axis=-1)
+
+
+def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:
+    """Points ``standoff_m`` behind goal poses along their approach axis (the gripper's z), ``(..., 3)``."""
+    w, x, y, z = np.moveaxis(np.asarray(goal_quat, dtype=float), -1, 0)
+    approach = np.stack((2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)), axis=-1)
+    return np.asarray(goal_position) - standoff_m * approach
+
+
+def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: FloatArray, speed: float,
+                standoff_m: float) -> FloatArray:
+    """The linear part of :func:`user_twist_toward` in translation mode (m/s): toward ``pregrasp`` while
+    farther than 1.5 ``standoff_m`` from ``goal_position``, then toward the goal."""
+    far = np.linalg.norm(np.asarray(goal_position) - position, axis=-1, keepdims=True) > 1.5 * standoff_m
+    return clip_norm(np.where(far, pregrasp, goal_position) - position, speed)
+
+
+def user_angular(quat: FloatArray, goal_quat: FloatArray, speed: float) -> FloatArray:
+    """The angular part of :func:`user_twist_toward` in rotation mode (rad/s)."""
+    return clip_norm(rotation_error(goal_quat, quat), speed)
 
 
 def ho_twist(weights: FloatArray, gradients: FloatArray) -> FloatArray:

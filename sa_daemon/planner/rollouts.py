@@ -1,20 +1,26 @@
 """Rollouts of the watch model: every (user goal, motion action) pair integrated from a set of start poses.
 
-A row of the batch is one start pose ``c``, one goal ``g`` the user heads to and one motion action ``a``
-(move-to-goal, HO, no-assist). At every step of ``dt`` seconds the user's twist is the one predicted for a
-user heading to ``g`` (:func:`~..model.twists.user_twist_toward`, current mode, smoothed speed), the
-robot's twist is ``a``'s velocity generator at the row's pose (HO weighted by the start's belief), and
-the pose moves by their blend (the user's alone for no-assist). Recorded per row and step ``s``:
+A rollout is one start ``c``, one goal ``g`` the user heads to and one motion action ``a`` (move-to-goal,
+HO, no-assist). At every step of ``dt`` seconds the user's twist is the one predicted for a user
+heading to ``g`` (:func:`~..model.twists.user_twist_toward`: current mode, smoothed speed), the robot's
+twist is ``a``'s velocity generator (HO weighted by the start's belief), and the pose moves by their
+blend (the user's twist alone for no-assist). Recorded per rollout and step ``s``:
 
 * ``value[c, g, a, s]``: ``Phi_g(x_s) + P_s``, the distance reward of section III-E of goal ``g`` (to its
   ``k_c``, with the +100 bonus) at the pose after ``s`` steps, plus the opposition penalties charged so
-  far (``-5`` per ``reward.step_s`` of predicted opposition, so a rate independent of ``dt``);
+  far (``-5`` per ``reward.step_s`` of predicted opposition: a rate, whatever ``dt``);
 * the pose and the penalties after ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC
-  log-likelihood the belief tracker would add over those steps (``-(Q_g' - V_g')`` per input sample,
+  log-likelihood the belief tracker adds over those steps (``-(Q_g' - V_g')`` per input sample,
   ``runtime.belief_hz`` samples a second).
 
 Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 ``sum_g b(g) value[c, g, a, s]``.
+
+**Separation.** Every velocity generator's linear part depends on the position alone and its angular
+part on the orientation alone, and the user drives one of the two. So in translation mode the
+orientation of a rollout does not depend on ``g`` and is integrated once per ``(c, a)``; in rotation
+mode the position is. The quaternion work, the expensive part, is then ``G`` times smaller in
+translation mode.
 """
 
 from __future__ import annotations
@@ -22,75 +28,109 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Config
-from ..geometry import FloatArray, integrate_pose, quat_angle
+from ..geometry import FloatArray, quat_angle, quat_mul, rotvec_to_quat
 from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_at
-from ..model.reward import distance_reward, opposes, opposition_reward
+from ..model.reward import distance_reward
 from ..model.twists import (
-    blend,
-    ho_goal_twists,
-    ho_twist,
-    move_twist,
-    user_twist_toward,
+    ho_goal_angular,
+    ho_goal_linear,
+    move_angular,
+    move_linear,
+    pregrasp_points,
+    user_angular,
+    user_linear,
 )
 
 
+def _opposes(u: FloatArray, r: FloatArray, threshold: float) -> FloatArray:
+    """Section III-E's opposition test over the last axis (3 components here)."""
+    return np.any((u * r < 0.0) & (np.abs(u) > threshold) & (np.abs(r) > threshold), axis=-1)
+
+
+def _turn(quat: FloatArray, w: FloatArray, dt: float) -> FloatArray:
+    q = quat_mul(rotvec_to_quat(w * dt), quat)
+    return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+
+
 class Rollouts:
-    """The batch of the module doc. Arrays are read-only results; construction does all the work.
+    """The batch of the module doc; construction does all the work.
 
     ``positions`` ``(C, 3)`` and ``quats`` ``(C, 4)`` are the start poses, ``weights`` ``(C, G)`` the
     belief HO uses at each, ``kp``/``kq`` the goals' ``k_c`` (``(G, 3)``, ``(G, 4)``), ``actions`` the
-    motion actions (moves index ``kp``), ``steps`` the number of ``dt`` steps.
+    motion actions (moves index ``kp``), ``speed`` the user's (m/s, rad/s), ``steps`` the number of
+    ``dt`` steps (s).
     """
 
     def __init__(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray,
                  kp: FloatArray, kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float],
                  steps: int, dt: float, watch_steps: int = 0) -> None:
         C, G, A = len(positions), len(kp), len(actions)
-        self.shape = (C, G, A)
-        kinds = np.array([[a.kind is ActionKind.MOVE, a.kind is ActionKind.HO, a.kind is ActionKind.NONE]
-                          for a in actions], dtype=bool).reshape(A, 3)
-        target = np.array([a.goal if a.kind is ActionKind.MOVE else 0 for a in actions], dtype=int)
-        # Flat rows in (c, g, a) order.
-        c_idx, g_idx, a_idx = (ix.ravel() for ix in np.meshgrid(np.arange(C), np.arange(G), np.arange(A),
-                                                                  indexing="ij"))
-        is_move, is_ho, is_none = kinds[a_idx, 0], kinds[a_idx, 1], kinds[a_idx, 2]
-        pos, quat = positions[c_idx].copy(), quats[c_idx].copy()
-        ugp, ugq = kp[g_idx], kq[g_idx]  # where each row's user heads (and whose reward it earns)
-        mgp, mgq = kp[target[a_idx]][is_move], kq[target[a_idx]][is_move]
-        ho_w = weights[c_idx[is_ho]]
-        per_step = opposition_reward(True, cfg.reward) * dt / cfg.reward.step_s
-        samples = cfg.runtime.belief_hz * dt  # tracker updates per rollout step
-        value = np.empty((len(c_idx), steps + 1))
-        penalty = np.zeros(len(c_idx))
-        loglik = np.zeros((len(c_idx), G))
+        translating = Mode(mode) is Mode.TRANSLATION
+        kind = [a.kind for a in actions]
+        is_move = np.array([k is ActionKind.MOVE for k in kind])
+        is_none = np.array([k is ActionKind.NONE for k in kind])
+        ho = [i for i, k in enumerate(kind) if k is ActionKind.HO]
+        mp = kp[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]  # (A, 3) move targets
+        mq = kq[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]
+        # Positions vary with the user's goal in translation mode, orientations in rotation mode.
+        P = np.broadcast_to(positions[:, None, None, :], (C, G if translating else 1, A, 3)).copy()
+        Q = np.broadcast_to(quats[:, None, None, :], (C, 1 if translating else G, A, 4)).copy()
+        gp, gq = kp[None, :, None, :], kq[None, :, None, :]  # the user's goals, (1, G, 1, .)
+        standoff = cfg.planner.user_standoff_m
+        pre = pregrasp_points(kp, kq, standoff)[None, :, None, :]
+        move_m = is_move[None, None, :, None]
+        w = weights[:, None, :, None]  # (C, 1, G, 1): HO's belief
+        t_apply = cfg.intent.action_apply_time_s
+        per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
+        th = cfg.reward.opposition_threshold
+        samples = cfg.runtime.belief_hz * dt
+        self.value = np.empty((C, G, A, steps + 1))
+        penalty = np.zeros((C, G, A))
+        loglik = np.zeros((C, G, A, G))
 
-        def phi(p: FloatArray, q: FloatArray) -> FloatArray:
-            return distance_reward(np.linalg.norm(p - ugp, axis=-1), quat_angle(q, ugq), cfg.reward)
+        def phi() -> FloatArray:
+            d_t = np.sqrt(np.sum((P - gp) ** 2, axis=-1))
+            return distance_reward(d_t, quat_angle(Q, gq), cfg.reward)  # (C, G, A)
 
-        value[:, 0] = phi(pos, quat)
+        self.value[..., 0] = phi()
+        zero = np.zeros(1)
         for s in range(steps):
-            u = user_twist_toward(pos, quat, ugp, ugq, mode, speed)
-            r = np.zeros_like(u)
-            if is_move.any():
-                r[is_move] = move_twist(pos[is_move], quat[is_move], mgp, mgq, cfg.move)
-            if is_ho.any():
-                grads = ho_goal_twists(pos[is_ho], quat[is_ho], u[is_ho], kp, kq, cfg)
-                r[is_ho] = ho_twist(ho_w, grads)
-            total = np.where(is_none[:, None], u, blend(u, r, cfg.blend))
-            penalty += np.where(opposes(u, r, cfg.reward.opposition_threshold), per_step, 0.0)
+            u_lin = user_linear(P, gp, pre, speed[0], standoff) if translating else zero
+            u_ang = zero if translating else user_angular(Q, gq, speed[1])
+            r_lin = np.where(move_m, move_linear(P, mp, cfg.move), 0.0)
+            r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
+            for i in ho:  # HO: the belief-weighted per-goal generator, after the user's twist
+                p1 = P[:, :, i] + (u_lin[:, :, i] if translating else 0.0) * t_apply
+                q1 = Q[:, :, i] if translating else _turn(Q[:, :, i], u_ang[:, :, i], t_apply)
+                r_lin = _set(r_lin, i, np.sum(w * ho_goal_linear(p1, kp, cfg), axis=2))
+                r_ang = _set(r_ang, i, np.sum(w * ho_goal_angular(q1, kq, cfg), axis=2))
+            alpha = cfg.blend.alpha
+            none_m = is_none[None, None, :, None]
+            t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
+            t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
+            opposed = _opposes(u_lin, r_lin, th) | _opposes(u_ang, r_ang, th)
+            penalty = penalty + np.where(opposed, per_step, 0.0)
             if s < watch_steps:
+                pos = np.broadcast_to(P, (C, G, A, 3))
+                quat = np.broadcast_to(Q, (C, G, A, 4))
+                u = np.concatenate((np.broadcast_to(u_lin, (C, G, A, 3)), np.broadcast_to(u_ang, (C, G, A, 3))),
+                                   axis=-1)
                 loglik -= samples * q_minus_v_at(pos, quat, u, kp, kq, cfg.intent)
-            pos, quat = integrate_pose(pos, quat, total, dt)
-            value[:, s + 1] = phi(pos, quat) + penalty
+            P = P + t_lin * dt
+            Q = _turn(Q, t_ang, dt)
+            self.value[..., s + 1] = phi() + penalty
             if s + 1 == watch_steps:
-                self.watch_positions = pos.reshape(C, G, A, 3)
-                self.watch_quats = quat.reshape(C, G, A, 4)
-                self.watch_penalty = penalty.reshape(C, G, A).copy()
-        self.value = value.reshape(C, G, A, steps + 1)
-        self.loglik = loglik.reshape(C, G, A, G)
+                self.watch_positions = np.broadcast_to(P, (C, G, A, 3)).copy()
+                self.watch_quats = np.broadcast_to(Q, (C, G, A, 4)).copy()
+                self.watch_penalty = np.broadcast_to(penalty, (C, G, A)).copy()
+        self.loglik = loglik
 
-    def commit_matrix(self, c: int, s: int) -> FloatArray:
-        """``M[g, a]``: the value of committing to action ``a`` for ``s`` steps from start ``c`` if the goal
-        is ``g``."""
-        return self.value[c, :, :, s]
+
+def _set(arr: FloatArray, i: int, v: FloatArray) -> FloatArray:
+    """``arr`` with action ``i``'s twists (``(C, g, 3)``) set, broadcasting ``arr`` up if ``v`` varies
+    with the user's goal where ``arr`` does not."""
+    if arr.shape[1] < v.shape[1]:
+        arr = np.broadcast_to(arr, (arr.shape[0], v.shape[1], *arr.shape[2:])).copy()
+    arr[:, :, i] = v
+    return arr
