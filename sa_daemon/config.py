@@ -134,6 +134,10 @@ class PlannerConfig(_Section):
         "predicted joystick evidence, then ask or move, over a horizon of horizon_s (docs/model.md)",
     )
     horizon_s: float = Field(5.0, gt=0, le=20, description="watch model: every plan is judged at this time (s)")
+    terminal_s: float = Field(
+        10.0, ge=0, le=100,
+        description="watch model: a plan's last pose is charged R_d for this long after the horizon (s)",
+    )
     watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
     watch_levels: int = Field(1, ge=0, le=1, description="watch model: 1 = a motion may be watched before deciding; 0 = no")
     watch_moves: int = Field(

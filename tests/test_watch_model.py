@@ -42,7 +42,7 @@ def test_the_predicted_user_heads_to_the_goal_in_its_mode_at_its_speed():
     assert np.all(user_twist_toward(p, q, goal, q, Mode.ROTATION, (0.05, 0.2)) == 0.0)  # aligned already
 
 
-def test_rollouts_without_motion_keep_the_start_value_and_a_move_gains_on_its_own_goal():
+def test_rollouts_standing_still_earn_the_stay_reward_each_step_and_a_move_gains_on_its_own_goal():
     cfg = _cfg()
     snap = _snap(speed=(0.0, 0.0))
     goals = snap.goals
@@ -50,10 +50,10 @@ def test_rollouts_without_motion_keep_the_start_value_and_a_move_gains_on_its_ow
     actions = [Action(ActionKind.MOVE, 0, goals.goals[0].target), HO_ACTION, NO_ASSIST]
     R = Rollouts(cfg, snap.pose.position[None], snap.pose.quat_wxyz[None], snap.probs[None], kp, kq, actions,
                  Mode.TRANSLATION, (0.0, 0.0), steps=8, dt=0.25, watch_steps=4)
-    none = R.value[0, :, 2, :]
-    assert np.allclose(none, none[:, :1])  # an idle user and no assistance: nothing moves
-    assert R.value[0, 0, 0, 8] > R.value[0, 0, 0, 0] + 1.0  # the move to goal 0 gains on goal 0
-    assert np.all(R.watch_penalty <= 0.0)
+    none = R.value[0, :, 2, :]  # an idle user and no assistance: the arm stands, each step earns stay
+    assert np.allclose(none, none[:, :1] + np.arange(9)[None] * R.stay[0][:, None])
+    assert np.all(R.stay < 0.0)  # far from every goal, standing costs
+    assert R.value[0, 0, 0, 8] > R.value[0, 0, 2, 8] + 1.0  # moving to goal 0 beats standing, for goal 0
     assert R.loglik.shape == (1, len(goals), 3, len(goals))
 
 

@@ -6,12 +6,16 @@ heading to ``g`` (:func:`~..model.twists.user_twist_toward`: current mode, smoot
 twist is ``a``'s velocity generator (HO weighted by the start's belief), and the pose moves by their
 blend (the user's twist alone for no-assist). Recorded per rollout and step ``s``:
 
-* ``value[c, g, a, s]``: ``Phi_g(x_s) + P_s``, the distance reward of section III-E of goal ``g`` (to its
-  ``k_c``, with the +100 bonus) at the pose after ``s`` steps, plus the opposition penalties charged so
-  far (``-5`` per ``reward.step_s`` of predicted opposition: a rate, whatever ``dt``);
-* the pose and the penalties after ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC
-  log-likelihood the belief tracker adds over those steps (``-(Q_g' - V_g')`` per input sample,
-  ``runtime.belief_hz`` samples a second).
+* ``value[c, g, a, s]``: the return of section III-E's reward over the first ``s`` steps, undiscounted,
+  for goal ``g``: per paper step (``reward.step_s``) the distance reward ``R_d`` to ``g``'s ``k_c`` at
+  the pose reached, plus ``-5`` where the robot's twist opposes the user's; ``+100`` once, when the
+  pose reaches ``k_c``, after which the rollout earns nothing more (the goal is terminal); plus, for a
+  rollout that has not arrived, ``R_d`` at its last pose for ``planner.terminal_s`` more (the task goes
+  on after the horizon from where it ends);
+* ``stay[c, g]``: the same return for one rollout step of standing still at start ``c`` (a question);
+* the pose after ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC log-likelihood the
+  belief tracker adds over those steps (``-(Q_g' - V_g')`` per input sample, ``runtime.belief_hz``
+  samples a second).
 
 Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 ``sum_g b(g) value[c, g, a, s]``.
@@ -85,15 +89,23 @@ class Rollouts:
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
         samples = cfg.runtime.belief_hz * dt
+        k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
         penalty = np.zeros((C, G, A))
         loglik = np.zeros((C, G, A, G))
 
-        def phi() -> FloatArray:
+        def reward_at() -> tuple[FloatArray, FloatArray]:
+            """(R_d without the bonus, reached) of every rollout's own goal at its pose, ``(C, G, A)``."""
             d_t = np.sqrt(np.sum((P - gp) ** 2, axis=-1))
-            return distance_reward(d_t, quat_angle(Q, gq), cfg.reward)  # (C, G, A)
+            d_r = quat_angle(Q, gq)
+            reached = (d_t <= cfg.reward.goal_translation_m) & (d_r <= cfg.reward.goal_rotation_rad)
+            return distance_reward(d_t, d_r, cfg.reward) - np.where(reached, cfg.reward.goal, 0.0), reached
 
-        self.value[..., 0] = phi()
+        tail = cfg.planner.terminal_s / cfg.reward.step_s  # the state at the horizon lasts this many paper steps
+        r0, arrived = reward_at()
+        self.value[..., 0] = np.where(arrived, 0.0, r0 * tail)
+        self.stay = np.where(arrived, 0.0, r0 * k)[:, :, 0]  # one rollout step standing still, (C, G)
+        total = np.zeros((C, G, A))
         zero = np.zeros(1)
         for s in range(steps):
             u_lin = user_linear(P, gp, pre, speed[0], standoff) if translating else zero
@@ -110,7 +122,8 @@ class Rollouts:
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = _opposes(u_lin, r_lin, th) | _opposes(u_ang, r_ang, th)
-            penalty = penalty + np.where(opposed, per_step, 0.0)
+            step_penalty = np.where(opposed & ~arrived, per_step, 0.0)
+            penalty = penalty + step_penalty
             if s < watch_steps:
                 pos = np.broadcast_to(P, (C, G, A, 3))
                 quat = np.broadcast_to(Q, (C, G, A, 4))
@@ -119,11 +132,13 @@ class Rollouts:
                 loglik -= samples * q_minus_v_at(pos, quat, u, kp, kq, cfg.intent)
             P = P + t_lin * dt
             Q = _turn(Q, t_ang, dt)
-            self.value[..., s + 1] = phi() + penalty
+            r, reached = reward_at()
+            total = total + np.where(arrived, 0.0, r * k + step_penalty + np.where(reached, cfg.reward.goal, 0.0))
+            arrived = arrived | reached
+            self.value[..., s + 1] = total + np.where(arrived, 0.0, r * tail)
             if s + 1 == watch_steps:
                 self.watch_positions = np.broadcast_to(P, (C, G, A, 3)).copy()
                 self.watch_quats = np.broadcast_to(Q, (C, G, A, 4)).copy()
-                self.watch_penalty = np.broadcast_to(penalty, (C, G, A)).copy()
         self.loglik = loglik
 
 

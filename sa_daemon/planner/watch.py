@@ -1,33 +1,30 @@
 """The watch model's search: ask now, assist and watch, or commit, compared on equal terms.
 
-Every decision looks ``T = planner.horizon_s`` ahead (``n`` steps of ``dt = planner.rollout_step_s``):
-committing to a motion is worth the distance reward of section III-E at the pose it reaches after ``T``
-(to each goal's ``k_c``, with the +100 bonus) plus the opposition penalties on the way (``-5`` per
-``reward.step_s`` of predicted opposition; :mod:`.rollouts`). Undiscounted. Time spent before that
-decision - a question standing the arm still, or a watched motion - is charged at the rate ``c`` the
-best commitment makes progress now, ``c = max(0, max_a b . M[:, a] - b . Phi(x)) / T`` (reward units per
-second): a question costs the paper's ``-5`` plus ``c`` times ``reward.question_time_s``, so it is dear
-far from the goals, where moving gains most, and cheap near them. Values are vectors over the goal
-``g`` the user really wants:
+Every plan is judged by the return of section III-E's reward over the same horizon ``T =
+planner.horizon_s`` from now, undiscounted (``n`` steps of ``dt = planner.rollout_step_s``; the
+reward per paper step ``reward.step_s``: the distance reward ``R_d`` to the goal's ``k_c``, ``-5`` for
+opposing the user, ``+100`` once at the goal, which is terminal; :mod:`.rollouts`). A question costs the
+paper's ``-5`` plus ``R_d`` at the pose where the arm stands still for ``reward.question_time_s``: dear
+far from the goals, cheap near them, and no discount artefact. Values are vectors over the goal ``g``
+the user really wants; with ``s`` steps left at belief ``b`` and pose ``x``:
 
-    commit_a[g]  = M_x[g, a]                                                (:mod:`.rollouts`)
-    ask_q[g]     = r_q - c t_q + P(yes | g) D(b_yes, x)[g] + P(no | g) D(b_no, x)[g]
-    watch_w[g]   = P_x[g, w] - c t_w + D(b'_gw, x'_gw)[g]                    (root only, watch_levels = 1)
-    D(b, x)      = the vector of the action in {commit_a, ask_q} with the largest b . vector
+    commit_a[g]  = M_x[g, a, s]                                               (:mod:`.rollouts`)
+    ask_q[g]     = -5 + n_q stay_x[g] + P(yes | g) D(b_yes, x, s - n_q)[g] + P(no | g) D(b_no, x, s - n_q)[g]
+    watch_w[g]   = M_x[g, w, n_w] + D(b'_gw, x'_gw, s - n_w)[g]               (root only, watch_levels = 1)
+    D(b, x, s)   = the vector of the action in {commit_a, ask_q} with the largest b . vector
 
 At every node the *tracker* picks the action that is best by *its* belief, as the daemon will, and the
 pick is credited with what it earns for ``g``; the root's value of an action is ``b . vector``. For
 commits and questions this is the usual expected value (answers are Bayes-consistent). For a watch it
-is not: ``watch`` runs the motion ``w`` for ``t_w = planner.watch_s`` while the user heads to ``g``, the
-arm reaches ``x'_gw``, penalties ``P_x[g, w]`` are charged, and the belief becomes ``b'_gw``: the root
-belief updated with the MaxEnt IOC likelihood of the joystick input predicted for that user - the
-tracker's own update. If the tracker would read a user heading to ``g`` as heading elsewhere, the watch
-is worth what the misled pick earns for ``g``. Branches are the top ``G_m`` goals (the ones actions
-exist for), weighted by ``b`` renormalised over them. Watched motions are HO, no-assist, and moves to
-the ``planner.watch_moves`` most likely goals. Answers update the belief by Bayes with
-``answer_p_correct``; question chains go ``planner.max_questions`` deep, or less where the batch of
-beliefs would pass ``MAX_BATCH``; beliefs reached by the same answers in another order are decided
-once.
+is not: ``watch`` runs the motion ``w`` for ``n_w`` steps (``planner.watch_s``) while the user heads to
+``g``; the arm reaches ``x'_gw`` and the belief becomes ``b'_gw``: the root belief updated with the
+MaxEnt IOC likelihood of the joystick input predicted for that user - the tracker's own update. If the
+tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
+earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), weighted by ``b``
+renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
+most likely goals. Answers update the belief by Bayes with ``answer_p_correct``; question chains go as
+deep as the horizon allows (``planner.max_questions`` at most, and less where a level would hold more
+than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once.
 
 The search is exhaustive over this finite tree (so exact), batched with numpy: all question children
 of a level in one call, all branches of every watched motion in one rollout batch. It is anytime in two
@@ -70,7 +67,8 @@ class WatchSearch:
         pc = cfg.planner
         self.dt = pc.rollout_step_s
         self.n = max(1, round(pc.horizon_s / self.dt))
-        self.n_w = min(self.n, max(1, round(pc.watch_s / self.dt)))
+        self.n_w = min(self.n - 1, max(1, round(pc.watch_s / self.dt)))
+        self.n_q = max(1, round(cfg.reward.question_time_s / self.dt))
         self.max_q = pc.max_questions
         p = cfg.intent.answer_p_correct
         qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
@@ -79,9 +77,9 @@ class WatchSearch:
         self.branches = np.array([g for g in cands if self.b0[g] > 0], dtype=int)
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
-        self.watched = (other_ix + move_ix) if pc.watch_levels > 0 else []
+        self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
         self.nodes = 0
-        self._memo: dict[int, tuple[Rollouts, FloatArray, FloatArray]] = {}
+        self._memo: dict[tuple[int, int], tuple[Rollouts, FloatArray]] = {}
 
     # -- pieces ------------------------------------------------------------------------------------------
 
@@ -97,34 +95,31 @@ class WatchSearch:
         if self.node_budget is not None and self.nodes >= self.node_budget:
             raise _Stop
 
-    def decide(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray,
+    def decide(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray, steps: int,
                depth: int = 0) -> tuple[FloatArray, np.ndarray]:
-        """``D`` for a batch: the tracker at beliefs ``B`` ``(n, G)``, at start poses ``c`` ``(n,)`` of ``R``,
-        after the answers ``yes`` ``(n, Q)`` to the questions ``asked`` ``(n, Q)``, picks the action best by
-        its belief. Returns what that choice is worth *if the goal is g*, ``(n, G)``, and the choice:
-        ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``."""
+        """``D`` for a batch: the tracker at beliefs ``B`` ``(n, G)``, at start poses ``c`` ``(n,)`` of ``R``
+        with ``steps`` left, after the answers ``yes`` ``(n, Q)`` to the questions ``asked`` ``(n, Q)``,
+        picks the action best by its belief. Returns what that choice is worth *if the goal is g*,
+        ``(n, G)``, and the choice: ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``."""
         self.nodes += len(B)
         n = len(B)
         rows = np.arange(n)
-        M, U = self._commits(R)  # (C, G, A), (C, G)
+        M = self._commits(R, steps)  # (C, G, A)
         if self.moves:
             E = np.empty((n, M.shape[2]))
             for cu in np.unique(c):  # one matrix product per start pose, not a (n, G, A) gather
                 at = c == cu
                 E[at] = B[at] @ M[cu]
             act = E.argmax(axis=1)
-            V, best = R.value[c, :, act, self.n], E[rows, act]
+            V, best = M[c, :, act], E[rows, act]
         else:
             act, V, best = np.zeros(n, dtype=int), np.full(B.shape, -np.inf), np.full(n, -np.inf)
-        if not self.questions or depth >= self.max_q:
+        avail = ~asked
+        if not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any():
             return V, act
-        # A question's credited value for g is at most r_q plus the best commit's for g (full
-        # information), so no question pays where r_q + b . max_a M[:, a] is no better than committing.
-        can_pay = self.r_q + np.einsum("ng,ng->n", B, U[c]) > best
-        avail = ~asked & can_pay[:, None]
-        if not avail.any() or 2 * int(avail.sum()) > MAX_BATCH:
+        if 2 * int(avail.sum()) > MAX_BATCH:
             return V, act
-        Vq = self.question_vectors(R, c, B, asked, yes, avail, depth)
+        Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
         better = eq[rows, q] > best
@@ -132,16 +127,15 @@ class WatchSearch:
         act = np.where(better, len(self.moves) + q, act)
         return V, act
 
-    def _commits(self, R: Rollouts) -> tuple[FloatArray, FloatArray]:
-        """``M`` of every start of ``R`` after the horizon, ``(C, G, A)``, and its best per goal, ``(C, G)``."""
-        hit = self._memo.get(id(R))
+    def _commits(self, R: Rollouts, steps: int) -> FloatArray:
+        """``value[..., steps]`` of ``R`` as a contiguous ``(C, G, A)`` array, kept for reuse."""
+        hit = self._memo.get((id(R), steps))
         if hit is None or hit[0] is not R:
-            M = np.ascontiguousarray(R.value[..., self.n])
-            hit = self._memo[id(R)] = (R, M, M.max(axis=2) if M.shape[2] else np.full(M.shape[:2], -np.inf))
-        return hit[1], hit[2]
+            hit = self._memo[(id(R), steps)] = (R, np.ascontiguousarray(R.value[..., steps]))
+        return hit[1]
 
     def question_vectors(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray,
-                         avail: np.ndarray, depth: int) -> FloatArray:
+                         avail: np.ndarray, steps: int, depth: int) -> FloatArray:
         """``ask_q`` of the module doc for every node and available question, ``(n, Q, G)`` (``-inf`` where
         not available). The children are deduplicated: a belief depends on the set of answers, not
         their order, so each (start, asked, yes) is decided once."""
@@ -156,18 +150,19 @@ class WatchSearch:
         kid_y = np.concatenate((yes[node] | eye[q], yes[node]))
         keys = np.concatenate((kid_c[:, None], np.packbits(kid_a, axis=1), np.packbits(kid_y, axis=1)), axis=1)
         _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-        v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], depth + 1)
+        v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        Vq[node, q] = self.r_q + L[q] * v[:k] + (1.0 - L[q]) * v[k:]
+        wait = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
+        Vq[node, q] = wait + L[q] * v[:k] + (1.0 - L[q]) * v[k:]
         return Vq
 
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
         """Value of every question at the root (then the tracker's choices), by the root belief."""
-        if self.max_q < 1 or not self.questions:
+        if self.max_q < 1 or not self.questions or self.n < self.n_q:
             return {}
-        Vq = self.question_vectors(R, np.zeros(1, dtype=int), self.b0[None], asked, asked.copy(), ~asked, 0)
+        Vq = self.question_vectors(R, np.zeros(1, dtype=int), self.b0[None], asked, asked.copy(), ~asked, self.n, 0)
         return {int(q): float(self.b0 @ Vq[0, q]) for q in np.flatnonzero(~asked[0])}
 
     def child_beliefs(self, R: Rollouts, w: int) -> FloatArray:
@@ -185,13 +180,13 @@ class WatchSearch:
         B = np.concatenate([self.child_beliefs(R, w) for w in ws])
         pos = np.concatenate([R.watch_positions[0, g, w] for w in ws])
         quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
-        kids = self._rollouts(pos, quat, B, self.n)
+        left = self.n - self.n_w
+        kids = self._rollouts(pos, quat, B, left)
         A = np.repeat(asked, len(B), axis=0)
-        V, _ = self.decide(kids, np.arange(len(B)), B, A, A.copy())
+        V, _ = self.decide(kids, np.arange(len(B)), B, A, A.copy(), left)
         v = V[np.arange(len(B)), np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
         p = self.b0[g] / self.b0[g].sum()
-        cost = self.rate * self.n_w * self.dt
-        return {self.moves[w]: float(p @ (R.watch_penalty[0, g, w] + v[i])) - cost for i, w in enumerate(ws)}
+        return {self.moves[w]: float(p @ (R.value[0, g, w, self.n_w] + v[i])) for i, w in enumerate(ws)}
 
     # -- search ------------------------------------------------------------------------------------------
 
@@ -204,9 +199,6 @@ class WatchSearch:
         commit = self.b0 @ R.value[0, :, :, self.n]
         values = {a: float(v) for a, v in zip(self.moves, commit, strict=True)}
         self.nodes += 1
-        stay = float(self.b0 @ R.value[0, :, 0, 0]) if self.moves else 0.0
-        self.rate = max(0.0, float(commit.max(initial=stay)) - stay) / (self.n * self.dt)
-        self.r_q = self.cfg.reward.question - self.rate * self.cfg.reward.question_time_s
         asked = np.zeros((1, len(self.questions)), dtype=bool)
         for q, v in self._root_questions(R, asked).items():
             values[self.questions[q]] = float(v)
