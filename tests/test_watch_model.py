@@ -1,6 +1,7 @@
 """The watch model (issue 16, in progress; ``planner.model = "watch"``): rollouts and search.
 
-Not yet the default: these tests pin its pieces, not the paper's behaviours.
+Not yet the default: these tests pin its pieces (the predicted user, the rollouts, the batched search
+against a plain recursion), not yet the paper's behaviours.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import config_from_dict
+from sa_daemon.geometry import Pose
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
 from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.model.twists import user_twist_toward
@@ -93,3 +95,83 @@ def test_a_node_budget_stops_before_the_watched_motions():
                     user_speed=snap.user_speed)
     r = Solver(model).plan(snap)
     assert not r.complete and r.upper_bound >= r.value
+
+
+# -- the search against a plain recursion ---------------------------------------------------------------
+
+
+def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
+    """Every root action's value by a plain recursion over the tree of ``planner/watch.py``'s module doc:
+    one node at a time, no batching, no deduplication, one rollout per start pose."""
+    s = WatchSearch(model, snap)
+    cfg, b0, pose = model.cfg, s.b0, snap.pose
+    r_q, n_q = cfg.reward.question, s.n_q
+
+    def roll(position, quat, weights, steps, watch_steps=0):
+        return Rollouts(cfg, position[None], quat[None], weights[None], s.kp, s.kq, s.moves, snap.mode,
+                        snap.user_speed, steps, s.dt, watch_steps)
+
+    def decide(R, b, asked: frozenset, steps: int, depth: int) -> np.ndarray:
+        best_e, best_v = -np.inf, None
+        for a in range(len(s.moves)):
+            v = R.value[0, :, a, steps]
+            if b @ v > best_e:
+                best_e, best_v = float(b @ v), v
+        if depth < s.max_q and steps >= n_q:
+            for q in range(len(s.questions)):
+                if q in asked:
+                    continue
+                L = s.L_yes[q]
+                py = float(b @ L)
+                vy = decide(R, b * L / py, asked | {q}, steps - n_q, depth + 1)
+                vn = decide(R, b * (1 - L) / (1 - py), asked | {q}, steps - n_q, depth + 1)
+                v = r_q + n_q * R.stay[0] + L * vy + (1 - L) * vn
+                if b @ v > best_e:
+                    best_e, best_v = float(b @ v), v
+        return best_v
+
+    R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
+    out = {a: float(b0 @ R.value[0, :, i, s.n]) for i, a in enumerate(s.moves)}
+    for q, a in enumerate(s.questions):
+        L = s.L_yes[q]
+        py = float(b0 @ L)
+        vy = decide(R, b0 * L / py, frozenset({q}), s.n - n_q, 1)
+        vn = decide(R, b0 * (1 - L) / (1 - py), frozenset({q}), s.n - n_q, 1)
+        out[a] = float(b0 @ (r_q + n_q * R.stay[0] + L * vy + (1 - L) * vn))
+    watched = {}
+    p = b0[s.branches] / b0[s.branches].sum()
+    for w in s.watched:
+        total = 0.0
+        for j, g in enumerate(s.branches):
+            log_b = np.log(b0) + R.loglik[0, g, w]
+            bc = np.exp(log_b - log_b.max())
+            bc /= bc.sum()
+            kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
+            total += p[j] * (R.value[0, g, w, s.n_w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[g])
+        watched[s.moves[w]] = total
+    return out, watched
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed):
+    rng = np.random.default_rng(seed)
+    cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
+               watch_moves=int(rng.integers(0, 3)))
+    reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
+    cfg = cfg.model_copy(update={"reward": reward})
+    model = SharedAutonomyModel(cfg)
+    goals = model.initial_belief(SCENE.goals).goals
+    probs = rng.dirichlet(np.full(len(goals), 0.7)) + 1e-6
+    pose = SCENE.start
+    start = Pose(pose.position + rng.normal(0.0, 0.05, 3), pose.quat_wxyz)
+    mode = Mode.TRANSLATION if seed % 3 else Mode.ROTATION
+    snap = Snapshot(goals, probs, start, np.zeros(6), mode, budget_s=None,
+                    user_speed=(float(rng.uniform(0, 0.1)), float(rng.uniform(0, 0.3))))
+    values, watched, complete = WatchSearch(model, snap).run()
+    ref_values, ref_watched = _reference_values(model, snap)
+    assert complete
+    assert values.keys() == ref_values.keys() and watched.keys() == ref_watched.keys()
+    for a, v in ref_values.items():
+        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    for a, v in ref_watched.items():
+        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
