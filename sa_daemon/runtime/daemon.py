@@ -285,6 +285,8 @@ class Daemon:
     def request_stop(self, reason: str) -> None:
         if self._stop_event is not None and not self._stop_event.is_set():
             self.ctl.stop()  # from now on every control tick commands zero, until the arm closes
+            if self.arm is not None:  # and a moving command still waiting for the arm's I/O is replaced now
+                self.arm.command_twist(np.zeros(6))
             self.event("shutdown", reason=reason)
             self._stop_event.set()
 
