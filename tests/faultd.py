@@ -417,7 +417,7 @@ def _block_loop(seconds: float, watch_s: float) -> dict:
     zero_at = None
     while time.monotonic() < t_block + watch_s:
         if zero_at is None and arm is not None and not any(arm.speed):
-            zero_at = time.monotonic()
+            zero_at = arm.stopped_since  # the fake's own instant: a late look (a busy CPU) does not move it
         time.sleep(0.0002)
     out: dict[str, Any] = {"blocked_at": round(t_block - d.t0, 6), "blocked_mono": t_block}
     if arm is None:

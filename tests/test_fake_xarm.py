@@ -260,6 +260,25 @@ def test_duration_expiry_zeroes_the_speed(clock):
     assert arm.get_state() == (0, 2)  # ready, idle
 
 
+def test_stopped_since_is_the_model_instant_the_speed_became_zero(clock):
+    """The instant a ``duration`` runs out, however late anyone reads it (the fault tests time the
+    controller's own stop with it, on a busy machine); a zero command's arrival; ``None`` while moving."""
+    arm = ready_arm(clock)
+    t0 = clock()
+    assert arm.stopped_since == t0
+    arm.vc_set_cartesian_velocity([100.0, 0, 0, 0, 0, 0], is_radian=True, duration=0.03)
+    assert arm.stopped_since is None
+    clock.advance(0.5)  # read 470 ms after the expiry
+    assert arm.stopped_since == pytest.approx(t0 + 0.03, abs=1e-12)
+    arm.vc_set_cartesian_velocity([100.0, 0, 0, 0, 0, 0], is_radian=True, duration=0)
+    clock.advance(0.1)
+    assert arm.stopped_since is None
+    arm.vc_set_cartesian_velocity([0.0] * 6, is_radian=True, duration=0)
+    t_zero = clock()
+    clock.advance(0.2)
+    assert arm.stopped_since == t_zero
+
+
 def test_each_command_restarts_the_duration(clock):
     arm = ready_arm(clock)
     for _ in range(10):

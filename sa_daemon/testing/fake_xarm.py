@@ -187,6 +187,7 @@ class FakeXArmAPI:
         self._joints = [float(a) for a in start_joints_rad]
         self._speed = np.zeros(6)
         self._expiry = math.inf
+        self._stopped_since: float | None = self._clock()
         self._t = clock()
         # gripper
         self._gripper_mode = 0
@@ -293,6 +294,15 @@ class FakeXArmAPI:
                     return False
                 self._log_cv.wait(left)
             return True
+
+    @property
+    def stopped_since(self) -> float | None:
+        """Clock time (s) since which the velocity in force has been zero: when the last moving command's
+        ``duration`` ran out (the model's instant, not when anyone looked), when a zero command landed,
+        or when the arm stopped itself; ``None`` while it moves."""
+        with self._lock:
+            self._advance()
+            return self._stopped_since
 
     @property
     def speed(self) -> FloatArray:
@@ -478,9 +488,14 @@ class FakeXArmAPI:
             if is_tool_coord:
                 r = quat_to_matrix(self._quat)
                 s[:3], s[3:] = r @ s[:3], r @ s[3:]
+            moving, was_moving = bool(np.any(s)), bool(np.any(self._speed))
             self._speed = s
             honour = d > 0 and self.version_number >= (1, 8, 0)
             self._expiry = self._clock() + d if honour else math.inf
+            if moving:
+                self._stopped_since = None
+            elif was_moving or self._stopped_since is None:
+                self._stopped_since = self._clock()
             return 0
 
         return self._set(
@@ -615,9 +630,11 @@ class FakeXArmAPI:
             self._pos_mm, self._quat = integrate_pose(self._pos_mm, self._quat, self._speed, dt)
         self._t = now
         if now >= self._expiry:
-            self._stop()
+            self._stop(at=self._expiry)
 
-    def _stop(self) -> None:
+    def _stop(self, at: float | None = None) -> None:
+        if np.any(self._speed) or self._stopped_since is None:
+            self._stopped_since = self._clock() if at is None else at
         self._speed = np.zeros(6)
         self._expiry = math.inf
 
