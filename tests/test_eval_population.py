@@ -11,10 +11,12 @@ import sys
 import pytest
 
 from sa_daemon.config import Config
+from sa_daemon.sim.episode import run_trial
 from sa_daemon.sim.evaluate import (
     TrialSpec,
     compare,
     format_summary,
+    question_measures,
     run_trials,
     summarise,
 )
@@ -174,3 +176,35 @@ def test_eval_refuses_an_unknown_profile_key_naming_it(tmp_path):
 def test_eval_needs_a_scene_or_a_suite():
     r = _cli("eval", "--quiet")
     assert r.returncode == 2 and "--suite" in r.stderr
+
+
+# -- when and what policy asks (issue 16's measures) ---------------------------------------------------
+
+
+def _asked(t: float, over_uniform: float, rank: int) -> dict:
+    return {"t": t, "target": "cup:top", "p_max": over_uniform / 4, "over_uniform": over_uniform,
+            "object_rank": rank}
+
+
+def test_question_measures_count_near_uniform_questions_object_ranks_first_times_and_early_choices():
+    a = {**_trial("policy", 0, 10.0), "asked": [_asked(0.8, 1.01, 3), _asked(3.0, 2.0, 1)],
+         "early_plans": {"move": 7, "none": 1, "question": 1}}
+    b = {**_trial("policy", 1, 12.0), "asked": [_asked(2.0, 1.5, 2)], "early_plans": {"ho": 9, "question": 1}}
+    c = {**_trial("policy", 2, 11.0), "asked": [], "early_plans": {"ho": 10}}
+    m = question_measures([a, b, c])
+    assert m["questions_near_uniform"] == pytest.approx(1 / 3)  # one, in the first trial
+    assert m["questions_top2"] == pytest.approx(2 / 3)  # ranks 3, 1, 2
+    assert m["first_question_s"] == pytest.approx((0.8 + 2.0) / 2)  # over the trials that asked
+    assert m["early_passive"] == pytest.approx((1 + 9 + 10) / 29)
+    assert question_measures([_trial("policy", 0, 10.0)]) == dict.fromkeys(m)  # old records: nothing
+
+
+def test_a_trial_records_each_question_with_the_belief_it_was_asked_on():
+    r = run_trial(load_scene("scene1"), "cup:side", "policy", 0, Config())
+    assert len(r.asked) == r.questions > 0
+    assert [q["t"] for q in r.asked] == sorted(q["t"] for q in r.asked)
+    for q in r.asked:
+        assert 1.0 <= q["over_uniform"] <= 4.0 and q["p_max"] == pytest.approx(q["over_uniform"] / 4, abs=1e-5)
+        assert q["object_rank"] >= 1
+    assert 0 < sum(r.early_plans.values()) <= 20  # plans every 0.1 s, none while a question waits
+    assert ("question" in r.early_plans) == (r.asked[0]["t"] < 2.0)

@@ -84,6 +84,8 @@ class TrialResult:
     timeline: Timeline | None = None
     failure: str = ""  # why it failed, with numbers (sim/success.py); "" for a success
     failure_kind: str = ""  # the same as one of sim.success.FAILURES, for counting
+    asked: list[dict] = field(default_factory=list)  # every question: when, what, on which belief
+    early_plans: dict[str, int] = field(default_factory=dict)  # actions planned in the first EARLY_S, by kind
     user: str = "calibrated"  # the simulated user's profile (sim/users.py)
 
     def metrics(self) -> dict:
@@ -92,10 +94,29 @@ class TrialResult:
             k: getattr(self, k)
             for k in (
                 "scene", "task", "user", "method", "seed", "success", "failure", "failure_kind",
-                "completion_time_s", "mode_changes",
+                "completion_time_s", "asked", "early_plans", "mode_changes",
                 "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
             )
         }
+
+
+EARLY_S = 2.0
+"""The opening of a task whose plans ``early_plans`` counts (s): the paper's Table II, HO chosen at the start."""
+
+
+def question_record(snap: Snapshot, target: str, t: float) -> dict:
+    """A question as the trial records it: when (s), about which target, the largest target probability
+    then and that over uniform (``1.0``: a uniform belief; issue 16 asks for none below 1.1), and the rank
+    of the target's object among the objects by probability (1 = the most likely)."""
+    tp = snap.goals.target_probabilities(snap.probs)
+    objects: dict[str, float] = {}
+    for k, v in tp.items():
+        obj = k.split(":", 1)[0]
+        objects[obj] = objects.get(obj, 0.0) + v
+    ranked = sorted(objects, key=lambda o: -objects[o])
+    p_max = max(tp.values())
+    return {"t": round(t, 6), "target": target, "p_max": round(p_max, 6),
+            "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(target.split(":", 1)[0]) + 1}
 
 
 def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str | None = None,
@@ -169,6 +190,8 @@ def run_trial(
     modes: list[str] = []
     opposed: list[bool] = []
     plans = 0
+    asked: list[dict] = []
+    early: dict[str, int] = {}
     closed = False
     timeline = Timeline() if record else None
     targets = scene.targets
@@ -195,7 +218,11 @@ def run_trial(
                 plans += 1
                 if on_plan is not None:
                     on_plan(snap, result)
-                ctl.accept_plan(snap, result, t)
+                if t < EARLY_S:
+                    kind = result.action.kind.value
+                    early[kind] = early.get(kind, 0) + 1
+                if ctl.accept_plan(snap, result, t) is not None:
+                    asked.append(question_record(snap, result.action.target, t))
         tick = ctl.tick(state, t)
         axes.append(inp.axes)
         modes.append(inp.mode.value)
@@ -225,6 +252,8 @@ def run_trial(
         success=outcome.success,
         failure=outcome.reason,
         failure_kind=outcome.kind,
+        asked=asked,
+        early_plans=early,
         user=user_name,
         completion_time_s=round(elapsed, 6),
         mode_changes=metrics.mode_changes([Mode.TRANSLATION.value] + modes),

@@ -173,9 +173,37 @@ def summarise(trials: list[dict]) -> list[dict]:
                 kind = t.get("failure_kind") or "unknown"  # (records from before issue 15 have none)
                 failures[kind] = failures.get(kind, 0) + 1
         row["failures"] = failures
+        row.update(question_measures(ts))
         row["ci95"] = ci
         out.append(row)
     return out
+
+
+def question_measures(ts: list[dict]) -> dict:
+    """When and what a cell's trials asked, and what they chose first (issue 16's targets), from the
+    records' ``asked`` and ``early_plans`` (``None`` where there is nothing to measure, e.g. records from
+    before these fields):
+
+    * ``questions_near_uniform``: questions a trial asked while the largest target probability was below
+      1.1 / number of targets, mean over trials;
+    * ``questions_top2``: the share of questions whose target's object was one of the two most likely;
+    * ``first_question_s``: when the first question came, mean over the trials that asked;
+    * ``early_passive``: the share of the plans of the first ``EARLY_S`` that chose HO or no-assist.
+    """
+    recs = [t for t in ts if "asked" in t]
+    if not recs:
+        return {"questions_near_uniform": None, "questions_top2": None, "first_question_s": None,
+                "early_passive": None}
+    qs = [q for t in recs for q in t["asked"]]
+    firsts = [t["asked"][0]["t"] for t in recs if t["asked"]]
+    early = [t.get("early_plans", {}) for t in recs]
+    n_early = sum(sum(e.values()) for e in early)
+    return {
+        "questions_near_uniform": float(np.mean([sum(q["over_uniform"] < 1.1 for q in t["asked"]) for t in recs])),
+        "questions_top2": float(np.mean([q["object_rank"] <= 2 for q in qs])) if qs else None,
+        "first_question_s": float(np.mean(firsts)) if firsts else None,
+        "early_passive": (sum(e.get("ho", 0) + e.get("none", 0) for e in early) / n_early) if n_early else None,
+    }
 
 
 def _ci(vals: list[float]) -> list[float] | None:
