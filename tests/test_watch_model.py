@@ -147,7 +147,7 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
             bc = np.exp(log_b - log_b.max())
             bc /= bc.sum()
             kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
-            total += p[j] * (R.value[0, g, w, s.n_w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[g])
+            total += p[j] * (R.watch_return[0, g, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[g])
         watched[s.moves[w]] = total
     return out, watched
 
@@ -175,3 +175,18 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed):
         assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
     for a, v in ref_watched.items():
         assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
+def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitment():
+    """With an idle user nothing moves while no-assist is watched, so the watch is worth standing for
+    ``n_w`` steps and then the best commitment over what is left of the horizon, from the same pose. The
+    terminal charge counts once, at the end of the horizon (not also at the end of the watch)."""
+    model = SharedAutonomyModel(_cfg(watch_moves=0, max_questions=0))
+    s = WatchSearch(model, _snap(speed=(0.0, 0.0)))
+    values, watched, _ = s.run()
+    pose = s.snap.pose
+    R = s._rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
+    stand_then = s.n_w * R.stay[0][:, None] + R.value[0, :, :, s.n - s.n_w]  # (G, A)
+    best = max(float(s.b0 @ stand_then[:, a]) for a in range(len(s.moves)))
+    assert watched[NO_ASSIST] == pytest.approx(best, rel=1e-3)
+    assert watched[NO_ASSIST] > values[NO_ASSIST]  # standing all along is worse: an idle arm gains nothing

@@ -13,7 +13,8 @@ blend (the user's twist alone for no-assist). Recorded per rollout and step ``s`
   rollout that has not arrived, ``R_d`` at its last pose for ``planner.terminal_s`` more (the task goes
   on after the horizon from where it ends);
 * ``stay[c, g]``: the same return for one rollout step of standing still at start ``c`` (a question);
-* the pose after ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC log-likelihood the
+* the pose and the return (without the terminal charge: the task goes on from there) after
+  ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC log-likelihood the
   belief tracker adds over those steps (``-(Q_g' - V_g')`` per input sample, ``runtime.belief_hz``
   samples a second).
 
@@ -139,6 +140,7 @@ class Rollouts:
             if s + 1 == watch_steps:
                 self.watch_positions = np.broadcast_to(P, (C, G, A, 3)).copy()
                 self.watch_quats = np.broadcast_to(Q, (C, G, A, 4)).copy()
+                self.watch_return = total.copy()  # the return so far, without the terminal charge
         self.loglik = loglik
 
 

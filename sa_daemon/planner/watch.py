@@ -10,10 +10,11 @@ the user really wants; with ``s`` steps left at belief ``b`` and pose ``x``:
 
     commit_a[g]  = M_x[g, a, s]                                               (:mod:`.rollouts`)
     ask_q[g]     = -5 + n_q stay_x[g] + P(yes | g) D(b_yes, x, s - n_q)[g] + P(no | g) D(b_no, x, s - n_q)[g]
-    watch_w[g]   = M_x[g, w, n_w] + D(b'_gw, x'_gw, s - n_w)[g]               (root only, watch_levels = 1)
+    watch_w[g]   = W_x[g, w] + D(b'_gw, x'_gw, s - n_w)[g]                    (root only, watch_levels = 1)
     D(b, x, s)   = the vector of the action in {commit_a, ask_q} with the largest b . vector
 
-At every node the *tracker* picks the action that is best by *its* belief, as the daemon will, and the
+where ``W_x[g, w]`` is the return of the watched steps alone (the terminal charge belongs to the end of the
+horizon only). At every node the *tracker* picks the action that is best by *its* belief, as the daemon will, and the
 pick is credited with what it earns for ``g``; the root's value of an action is ``b . vector``. For
 commits and questions this is the usual expected value (answers are Bayes-consistent). For a watch it
 is not: ``watch`` runs the motion ``w`` for ``n_w`` steps (``planner.watch_s``) while the user heads to
@@ -186,7 +187,7 @@ class WatchSearch:
         V, _ = self.decide(kids, np.arange(len(B)), B, A, A.copy(), left)
         v = V[np.arange(len(B)), np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
         p = self.b0[g] / self.b0[g].sum()
-        return {self.moves[w]: float(p @ (R.value[0, g, w, self.n_w] + v[i])) for i, w in enumerate(ws)}
+        return {self.moves[w]: float(p @ (R.watch_return[0, g, w] + v[i])) for i, w in enumerate(ws)}
 
     # -- search ------------------------------------------------------------------------------------------
 
