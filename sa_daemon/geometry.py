@@ -146,8 +146,14 @@ def integrate_pose(
     """
     twist = np.asarray(twist, dtype=float)
     p = np.asarray(position, dtype=float) + twist[..., :3] * dt
-    q = quat_mul(rotvec_to_quat(twist[..., 3:] * dt), quat_wxyz)
-    return p, q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    return p, turn(quat_wxyz, twist[..., 3:], dt)
+
+
+def turn(quat_wxyz: ArrayLike, angular: ArrayLike, dt: float) -> FloatArray:
+    """The orientation part of :func:`integrate_pose`: ``exp(w dt) q`` for a base-frame angular velocity
+    ``w`` (rad/s) applied for ``dt`` seconds, renormalised. Broadcasts over leading axes."""
+    q = quat_mul(rotvec_to_quat(np.asarray(angular, dtype=float) * dt), quat_wxyz)
+    return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
 
 
 def rotation_error(target_quat_wxyz: ArrayLike, quat_wxyz: ArrayLike) -> FloatArray:

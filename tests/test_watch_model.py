@@ -13,7 +13,7 @@ from sa_daemon.config import config_from_dict
 from sa_daemon.geometry import Pose
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
 from sa_daemon.model.model import SharedAutonomyModel
-from sa_daemon.model.twists import user_twist_toward
+from sa_daemon.model.twists import pregrasp_points, user_angular, user_linear
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
@@ -33,15 +33,28 @@ def _snap(speed=(0.02, 0.0), probs=None, budget_s=None):
     return Snapshot(goals, p, SCENE.start, np.zeros(6), budget_s=budget_s, user_speed=speed)
 
 
-def test_the_predicted_user_heads_to_the_goal_in_its_mode_at_its_speed():
+def test_the_predicted_user_heads_to_the_goal_at_its_speed_and_slows_near_it():
     p, q = SCENE.start.position, SCENE.start.quat_wxyz
     goal = p + np.array([0.3, 0.0, -0.4])
-    u = user_twist_toward(p, q, goal, q, Mode.TRANSLATION, (0.05, 0.2))
-    assert np.linalg.norm(u[:3]) == pytest.approx(0.05)
-    assert np.allclose(u[:3] / 0.05, (goal - p) / 0.5) and np.all(u[3:] == 0.0)
-    near = user_twist_toward(p, q, p + np.array([0.01, 0.0, 0.0]), q, Mode.TRANSLATION, (0.05, 0.2))
+    u = user_linear(p, goal, pregrasp_points(goal, q, 0.0), 0.05, 0.0)
+    assert np.linalg.norm(u) == pytest.approx(0.05)
+    assert np.allclose(u / 0.05, (goal - p) / 0.5)
+    near_goal = p + np.array([0.01, 0.0, 0.0])
+    near = user_linear(p, near_goal, pregrasp_points(near_goal, q, 0.0), 0.05, 0.0)
     assert near[0] == pytest.approx(0.01)  # slows within a second of the goal
-    assert np.all(user_twist_toward(p, q, goal, q, Mode.ROTATION, (0.05, 0.2)) == 0.0)  # aligned already
+    assert np.all(user_angular(q, q, 0.2) == 0.0)  # aligned already
+
+
+def test_the_predicted_user_aims_behind_the_grasp_until_close():
+    grasp = SCENE.goal("cup:side").poses[0]
+    pre = pregrasp_points(grasp.position, grasp.quat_wxyz, 0.06)
+    assert np.allclose(pre, grasp.position - 0.06 * grasp.rotation[:, 2])
+    far = grasp.position + np.array([-0.3, 0.0, 0.2])
+    u = user_linear(far, grasp.position, pre, 0.05, 0.06)
+    assert np.allclose(u / np.linalg.norm(u), (pre - far) / np.linalg.norm(pre - far))
+    close = grasp.position - 0.05 * grasp.rotation[:, 2] + np.array([0.0, 0.0, 0.02])  # within 9 cm
+    v = user_linear(close, grasp.position, pre, 0.05, 0.06)
+    assert np.allclose(v / np.linalg.norm(v), (grasp.position - close) / np.linalg.norm(grasp.position - close))
 
 
 def test_rollouts_standing_still_earn_the_stay_reward_each_step_and_a_move_gains_on_its_own_goal():

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
-from ..geometry import FloatArray, integrate_pose, rotation_error
+from ..geometry import FloatArray, integrate_pose, quat_to_matrix, rotation_error
 from .actions import Mode
 from .huber import (
     assistance_angular,
@@ -106,41 +106,23 @@ def ho_goal_angular(quat: FloatArray, goal_quats: FloatArray, cfg: Config) -> Fl
     return move_angular(quat[..., None, :], goal_quats, cfg.move)
 
 
-def user_twist_toward(
-    position: FloatArray, quat: FloatArray, goal_position: FloatArray, goal_quat: FloatArray, mode: Mode,
-    speed: tuple[float, float], standoff_m: float = 0.0,
-) -> FloatArray:
-    """The twist of a user heading to a goal pose (m/s, rad/s), broadcasting like :func:`move_twist`: in
-    the current ``mode`` only, at the user's ``speed`` (linear m/s, angular rad/s), slowing within one
-    second of its aim (gain 1/s, saturated at the speed). Translating, it aims at the pre-grasp point
-    ``standoff_m`` behind the goal along its approach axis while farther than 1.5 ``standoff_m`` from the
-    goal, then at the goal (:func:`user_linear`). The watch model's prediction of the joystick
-    (``docs/model.md``)."""
-    if Mode(mode) is Mode.TRANSLATION:
-        lin = user_linear(position, goal_position, pregrasp_points(goal_position, goal_quat, standoff_m), speed[0],
-                          standoff_m)
-        return np.concatenate((lin, np.zeros_like(lin)), axis=-1)
-    ang = user_angular(quat, goal_quat, speed[1])
-    return np.concatenate((np.zeros_like(ang), ang), axis=-1)
-
-
 def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:
     """Points ``standoff_m`` behind goal poses along their approach axis (the gripper's z), ``(..., 3)``."""
-    w, x, y, z = np.moveaxis(np.asarray(goal_quat, dtype=float), -1, 0)
-    approach = np.stack((2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)), axis=-1)
-    return np.asarray(goal_position) - standoff_m * approach
+    return np.asarray(goal_position) - standoff_m * quat_to_matrix(goal_quat)[..., :, 2]
 
 
 def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: FloatArray, speed: float,
                 standoff_m: float) -> FloatArray:
-    """The linear part of :func:`user_twist_toward` in translation mode (m/s): toward ``pregrasp`` while
-    farther than 1.5 ``standoff_m`` from ``goal_position``, then toward the goal."""
+    """The watch model's prediction of the joystick in translation mode (m/s; ``docs/model.md``): a user
+    heading to ``goal_position`` aims at its ``pregrasp`` point while farther than 1.5 ``standoff_m`` from
+    the goal, then at the goal, at its ``speed`` (m/s), slowing within one second of its aim (gain 1/s,
+    saturated at the speed). Broadcasts like :func:`move_twist`."""
     far = np.linalg.norm(np.asarray(goal_position) - position, axis=-1, keepdims=True) > 1.5 * standoff_m
     return clip_norm(np.where(far, pregrasp, goal_position) - position, speed)
 
 
 def user_angular(quat: FloatArray, goal_quat: FloatArray, speed: float) -> FloatArray:
-    """The angular part of :func:`user_twist_toward` in rotation mode (rad/s)."""
+    """The same in rotation mode (rad/s): toward ``goal_quat`` at ``speed`` (rad/s), gain 1/s."""
     return clip_norm(rotation_error(goal_quat, quat), speed)
 
 

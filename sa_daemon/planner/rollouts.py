@@ -2,7 +2,7 @@
 
 A rollout is one start ``c``, one goal ``g`` the user heads to and one motion action ``a`` (move-to-goal,
 HO, no-assist). At every step of ``dt`` seconds the user's twist is the one predicted for a user
-heading to ``g`` (:func:`~..model.twists.user_twist_toward`: current mode, smoothed speed), the robot's
+heading to ``g`` (:func:`~..model.twists.user_linear` / ``user_angular``: current mode, smoothed speed), the robot's
 twist is ``a``'s velocity generator (HO weighted by the start's belief), and the pose moves by their
 blend (the user's twist alone for no-assist). Recorded per rollout and step ``s``:
 
@@ -33,10 +33,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Config
-from ..geometry import FloatArray, quat_angle, quat_mul, rotvec_to_quat
+from ..geometry import FloatArray, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_at
-from ..model.reward import distance_reward
+from ..model.reward import distance_reward, opposes
 from ..model.twists import (
     ho_goal_angular,
     ho_goal_linear,
@@ -46,16 +46,6 @@ from ..model.twists import (
     user_angular,
     user_linear,
 )
-
-
-def _opposes(u: FloatArray, r: FloatArray, threshold: float) -> FloatArray:
-    """Section III-E's opposition test over the last axis (3 components here)."""
-    return np.any((u * r < 0.0) & (np.abs(u) > threshold) & (np.abs(r) > threshold), axis=-1)
-
-
-def _turn(quat: FloatArray, w: FloatArray, dt: float) -> FloatArray:
-    q = quat_mul(rotvec_to_quat(w * dt), quat)
-    return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
 
 
 class Rollouts:
@@ -85,6 +75,8 @@ class Rollouts:
         standoff = cfg.planner.user_standoff_m
         pre = pregrasp_points(kp, kq, standoff)[None, :, None, :]
         move_m = is_move[None, None, :, None]
+        none_m = is_none[None, None, :, None]
+        alpha = cfg.blend.alpha
         w = weights[:, None, :, None]  # (C, 1, G, 1): HO's belief
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
@@ -92,7 +84,6 @@ class Rollouts:
         samples = cfg.runtime.belief_hz * dt
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
-        penalty = np.zeros((C, G, A))
         loglik = np.zeros((C, G, A, G))
 
         def reward_at() -> tuple[FloatArray, FloatArray]:
@@ -115,16 +106,13 @@ class Rollouts:
             r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
             for i in ho:  # HO: the belief-weighted per-goal generator, after the user's twist
                 p1 = P[:, :, i] + (u_lin[:, :, i] if translating else 0.0) * t_apply
-                q1 = Q[:, :, i] if translating else _turn(Q[:, :, i], u_ang[:, :, i], t_apply)
-                r_lin = _set(r_lin, i, np.sum(w * ho_goal_linear(p1, kp, cfg), axis=2))
-                r_ang = _set(r_ang, i, np.sum(w * ho_goal_angular(q1, kq, cfg), axis=2))
-            alpha = cfg.blend.alpha
-            none_m = is_none[None, None, :, None]
+                q1 = Q[:, :, i] if translating else turn(Q[:, :, i], u_ang[:, :, i], t_apply)
+                r_lin[:, :, i] = np.sum(w * ho_goal_linear(p1, kp, cfg), axis=2)
+                r_ang[:, :, i] = np.sum(w * ho_goal_angular(q1, kq, cfg), axis=2)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
-            opposed = _opposes(u_lin, r_lin, th) | _opposes(u_ang, r_ang, th)
+            opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)
             step_penalty = np.where(opposed & ~arrived, per_step, 0.0)
-            penalty = penalty + step_penalty
             if s < watch_steps:
                 pos = np.broadcast_to(P, (C, G, A, 3))
                 quat = np.broadcast_to(Q, (C, G, A, 4))
@@ -132,7 +120,7 @@ class Rollouts:
                                    axis=-1)
                 loglik -= samples * q_minus_v_at(pos, quat, u, kp, kq, cfg.intent)
             P = P + t_lin * dt
-            Q = _turn(Q, t_ang, dt)
+            Q = turn(Q, t_ang, dt)
             r, reached = reward_at()
             total = total + np.where(arrived, 0.0, r * k + step_penalty + np.where(reached, cfg.reward.goal, 0.0))
             arrived = arrived | reached
@@ -143,11 +131,3 @@ class Rollouts:
                 self.watch_return = total.copy()  # the return so far, without the terminal charge
         self.loglik = loglik
 
-
-def _set(arr: FloatArray, i: int, v: FloatArray) -> FloatArray:
-    """``arr`` with action ``i``'s twists (``(C, g, 3)``) set, broadcasting ``arr`` up if ``v`` varies
-    with the user's goal where ``arr`` does not."""
-    if arr.shape[1] < v.shape[1]:
-        arr = np.broadcast_to(arr, (arr.shape[0], v.shape[1], *arr.shape[2:])).copy()
-    arr[:, :, i] = v
-    return arr

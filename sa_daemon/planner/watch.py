@@ -50,10 +50,6 @@ MAX_BATCH = 20_000
 """Beliefs one question level may hold; a deeper level than this is not searched (a depth limit)."""
 
 
-class _Stop(Exception):
-    pass
-
-
 class WatchSearch:
     """One snapshot's watch-model problem and its search (module doc)."""
 
@@ -90,11 +86,9 @@ class WatchSearch:
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
                         steps, self.dt, watch_steps)
 
-    def _check(self) -> None:
-        if time.perf_counter() > self.deadline:
-            raise _Stop
-        if self.node_budget is not None and self.nodes >= self.node_budget:
-            raise _Stop
+    def _out_of_budget(self) -> bool:
+        """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
+        return time.perf_counter() > self.deadline or (self.node_budget is not None and self.nodes >= self.node_budget)
 
     def decide(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray, steps: int,
                depth: int = 0) -> tuple[FloatArray, np.ndarray]:
@@ -116,9 +110,8 @@ class WatchSearch:
         else:
             act, V, best = np.zeros(n, dtype=int), np.full(B.shape, -np.inf), np.full(n, -np.inf)
         avail = ~asked
-        if not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any():
-            return V, act
-        if 2 * int(avail.sum()) > MAX_BATCH:
+        if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
+                or 2 * int(avail.sum()) > MAX_BATCH):
             return V, act
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
@@ -205,9 +198,7 @@ class WatchSearch:
             values[self.questions[q]] = float(v)
         if not self.watched:
             return values, {}, True
-        try:
-            self._check()
-        except _Stop:
+        if self._out_of_budget():
             return values, {}, False
         return values, self.watch_values(R, asked), True
 

@@ -29,7 +29,7 @@ from ..geometry import Pose
 from ..model.actions import Mode
 from ..planner.snapshot import PlanResult, Snapshot
 from ..planner.solver import Solver
-from ..world.goals import Goal
+from ..world.goals import Goal, parse_target
 from ..world.holding import holds
 from ..world.scene import Scene, SceneObject
 from . import metrics
@@ -111,12 +111,12 @@ def question_record(snap: Snapshot, target: str, t: float) -> dict:
     tp = snap.goals.target_probabilities(snap.probs)
     objects: dict[str, float] = {}
     for k, v in tp.items():
-        obj = k.split(":", 1)[0]
+        obj = parse_target(k)[0]
         objects[obj] = objects.get(obj, 0.0) + v
     ranked = sorted(objects, key=lambda o: -objects[o])
     p_max = max(tp.values())
     return {"t": round(t, 6), "target": target, "p_max": round(p_max, 6),
-            "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(target.split(":", 1)[0]) + 1}
+            "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(parse_target(target)[0]) + 1}
 
 
 def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str | None = None,
