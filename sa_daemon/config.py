@@ -54,6 +54,14 @@ class IntentConfig(_Section):
     rotation_weight_m_per_rad: float = Field(
         0.05, ge=0, description="weight of rotation distance when picking k_c (m per rad)"
     )
+    step_cost: Literal["time", "path"] = Field(
+        "path",
+        description="cost of the user's step in Q: time = T x slope of V whatever the input (Javdani's); "
+        "path = T x slope x |u| (proportional to the distance the input moves the gripper)",
+    )
+    rationality: float = Field(
+        10.0, gt=0, description="beta in P(u | g) ~ exp(-beta (Q_g - V_g)), per input sample (docs/model.md, The tracker)"
+    )
 
 
 class HOConfig(_Section):
@@ -64,8 +72,9 @@ class HOConfig(_Section):
     translation_shrink_m: float = Field(0.02, gt=0, description="gradient shrinks linearly inside this (m)")
     rotation_shrink_rad: float = Field(math.pi / 12, gt=0, description="gradient shrinks inside this (rad)")
     generator: Literal["gradient", "moves"] = Field(
-        "gradient",
-        description="per-goal twist HO averages: gradient = Javdani's -dQ/du; moves = the move-to-goal generator",
+        "moves",
+        description="gradient = the belief-weighted mean of Javdani's -dQ/du; moves = the move-to-goal generator "
+        "applied to the belief-weighted mean error (same gain and top speed as a move)",
     )
 
 
@@ -102,7 +111,9 @@ class RewardConfig(_Section):
     )
     question: float = Field(-5.0, le=0)
     question_time_s: float = Field(
-        0.0, ge=0, description="time a question stops progress (s): costs this share of the best move's gain"
+        2.5, ge=0,
+        description="time a question stops the arm (s): the watch model charges R_d there for this long; the "
+        "commit model charges this share of the best move's gain",
     )
     repeated_question: float = Field(-100.0, le=0)
     goal: float = Field(100.0, ge=0, description="reward for reaching the desired pose")
@@ -129,13 +140,13 @@ class PlannerConfig(_Section):
     )
     bound_levels: int = Field(3, ge=0, le=6, description="how far the solver refines its question bounds")
     model: Literal["commit", "watch"] = Field(
-        "commit",
+        "watch",
         description="commit: moves end the search (H-step lookahead); watch: motion for watch_s, then the "
         "predicted joystick evidence, then ask or move, over a horizon of horizon_s (docs/model.md)",
     )
     horizon_s: float = Field(5.0, gt=0, le=20, description="watch model: every plan is judged at this time (s)")
     terminal_s: float = Field(
-        10.0, ge=0, le=100,
+        2.0, ge=0, le=100,
         description="watch model: a plan's last pose is charged R_d for this long after the horizon (s)",
     )
     watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
@@ -143,7 +154,7 @@ class PlannerConfig(_Section):
     watch_moves: int = Field(
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
-    rollout_step_s: float = Field(0.25, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
+    rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     user_standoff_m: float = Field(
         0.06, ge=0, le=0.3,
         description="watch model: the predicted user translates to this far behind a grasp along its approach first (m)",

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from sa_daemon.config import BlendConfig, Config, HOConfig, IntentConfig, MoveConfig
+from sa_daemon.config import (
+    BlendConfig,
+    Config,
+    HOConfig,
+    IntentConfig,
+    MoveConfig,
+    config_from_dict,
+)
 from sa_daemon.geometry import Pose, quat_mul, rotvec_to_quat
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
 from sa_daemon.model.huber import goal_gradients
@@ -188,12 +195,34 @@ def test_move_command_is_the_blend_of_user_and_move_twist(two_goal_scene):
     np.testing.assert_allclose(cmd.total_twist, [0.5 * v, 0.05, 0, 0, 0, 0], atol=1e-12)
 
 
-def test_ho_command_uses_the_belief_weighted_gradient(two_goal_scene):
+def test_ho_command_with_javdanis_generator_uses_the_belief_weighted_gradient(two_goal_scene):
     goals, pose = two_goal_scene
     probs = np.array([0.25, 0.75])
-    cmd = SharedAutonomyModel(Config()).command(HO_ACTION, goals, probs, pose, np.zeros(6))
+    cfg = config_from_dict({"ho": {"generator": "gradient"}})
+    cmd = SharedAutonomyModel(cfg).command(HO_ACTION, goals, probs, pose, np.zeros(6))
     far = 2.45 / 40
     np.testing.assert_allclose(cmd.robot_twist, [0.25 * far, 0.75 * far, 0, 0, 0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize("probs", [(0.25, 0.75), (0.5, 0.5), (1.0, 0.0)])
+def test_ho_command_by_default_is_the_move_generator_on_the_expected_error(two_goal_scene, probs):
+    """``ho.generator = "moves"``: gain times the belief-weighted mean of the errors to each goal's
+    ``k_c``, saturated at the move's top speed (so HO and a move share gain and speed limit)."""
+    goals, pose = two_goal_scene
+    cfg = Config()
+    b = np.array(probs)
+    cmd = SharedAutonomyModel(cfg).command(HO_ACTION, goals, b, pose, np.zeros(6))
+    kp, _ = goals.desired_poses(pose, cfg.intent.rotation_weight_m_per_rad)
+    error = b[0] * (kp[0] - pose.position) + b[1] * (kp[1] - pose.position)
+    want = cfg.move.linear_gain * error
+    speed = float(np.linalg.norm(want))
+    want = want * min(1.0, cfg.move.linear_max_mps / speed)
+    np.testing.assert_allclose(cmd.robot_twist[:3], want, atol=1e-12)
+    assert np.linalg.norm(cmd.robot_twist[:3]) <= cfg.move.linear_max_mps + 1e-12
+    if probs == (1.0, 0.0):  # a certain belief: HO is the move to that goal
+        move = SharedAutonomyModel(cfg).command(Action(ActionKind.MOVE, 0, goals.goals[0].target), goals, b, pose,
+                                                np.zeros(6))
+        np.testing.assert_allclose(cmd.robot_twist, move.robot_twist, atol=1e-12)
 
 
 def test_ho_plus_noassist_falls_back_exactly_when_ho_opposes(two_goal_scene):

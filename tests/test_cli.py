@@ -133,10 +133,12 @@ def test_eval_with_a_valid_config_file_uses_it(tmp_path):
 def bench_runs(tmp_path_factory):
     """Both planner benchmarks, run at the same time (each takes seconds)."""
     d = tmp_path_factory.mktemp("bench")
+    commit = d / "commit.toml"  # the pomdp_py peer plans the commit model
+    commit.write_text('[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n')
     jobs = {
         "no_peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "4", "--no-peer",
                          "--json", str(d / "no_peer.json")), d / "no_peer.json"),
-        "peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "3",
+        "peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "3", "--config", str(commit),
                       "--json", str(d / "peer.json")), d / "peer.json"),
     }
     procs = {
@@ -175,7 +177,7 @@ def test_bench_planner_without_peer(bench_runs):
     assert rc == 0, stderr
     assert "planner benchmark: scene1" in stdout
     data = _check_bench_json(path)
-    assert data["samples"] == 4
+    assert data["samples"] == 4 and data["model"] == "watch"  # the default planner
     assert data["peer_agreement_at_budget"] is None
 
 
@@ -183,7 +185,7 @@ def test_bench_planner_with_peer(bench_runs):
     rc, stdout, stderr, path = bench_runs["peer"]
     assert rc == 0, stderr
     data = _check_bench_json(path)
-    assert data["samples"] == 3
+    assert data["samples"] == 3 and data["model"] == "commit"
     peer = data["peer_agreement_at_budget"]
     assert isinstance(peer, (int, float)) and 0.0 <= peer <= 1.0
     assert "POUCT" in stdout

@@ -39,12 +39,11 @@ def make_ctl(method: str = "policy", cfg: Config = CFG, kinematics=None) -> Cont
     return Controller(cfg, SCENE.goals, method, DT, kinematics)
 
 
-def sharp_cfg(weight: float = 30.0) -> Config:
-    """Defaults, but the translation term of the MaxEnt IOC update weighs ``weight`` times more, so a few
-    samples of input toward one target concentrate the belief and trigger resampling (``N_eff < |G|/2``
-    and a new allocation) well within one plan's validity."""
-    tr = CFG.intent.translation.model_dump()
-    return config_from_dict({"intent": {"translation": {**tr, "weight": weight}}})
+def sharp_cfg(factor: float = 3.0) -> Config:
+    """Defaults, but the MaxEnt IOC update's rationality ``factor`` times the default, so a few samples of
+    input toward one target concentrate the belief and trigger resampling (``N_eff < |G|/2`` and a new
+    allocation) well within one plan's validity."""
+    return config_from_dict({"intent": {"rationality": factor * CFG.intent.rationality}})
 
 
 def result(action: Action) -> PlanResult:

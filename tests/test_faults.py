@@ -650,6 +650,14 @@ def test_bad_joystick_config_is_refused_even_with_a_stick_plugged(tmp_path):
 # -- speech: the engine missing, failing, hanging; the sound player failing, hanging ----------------------
 
 SPEECH_CONFIG = """\
+# The commit model asks early and often, so these tests of the question machinery get their questions
+# in good time; the default planner asks about once a task (docs/model.md).
+[planner]
+model = "commit"
+
+[reward]
+question_time_s = 0.0
+
 [sim_user]
 answer_delay_s = 1000.0
 

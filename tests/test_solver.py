@@ -38,8 +38,10 @@ TOP = (math.pi, 0.0, 0.0)
 def config(H: int = 15, top_goals: int = 3, max_questions: int = 10, every_step: bool = False) -> Config:
     return config_from_dict(
         {
-            "reward": {"lookahead_steps": H, "opposition_every_step": every_step},
-            "planner": {"top_goals": top_goals, "max_questions": max_questions},
+            # The commit model (moves end the search) with the paper's question cost and Javdani's HO.
+            "reward": {"lookahead_steps": H, "opposition_every_step": every_step, "question_time_s": 0.0},
+            "planner": {"model": "commit", "top_goals": top_goals, "max_questions": max_questions},
+            "ho": {"generator": "gradient"},
             # The geometry of these tests was laid out for move limits equal to the joystick's.
             "move": {"linear_max_mps": 0.2, "angular_max_radps": 0.4},
         }

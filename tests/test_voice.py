@@ -220,10 +220,11 @@ BLOCKED = "import sys; sys.modules[{mod!r}] = None\nfrom sa_daemon.cli import ma
 @pytest.mark.parametrize("mod, argv, extra", [
     ("pocketsphinx", ["hear", "x.wav"], "voice"),
     ("pocketsphinx", ["bench", "voice"], "voice"),
-    ("pomdp_py", ["bench", "planner", "--scene", "scene1", "--samples", "1"], "bench"),
+    ("pomdp_py", ["bench", "planner", "--scene", "scene1", "--samples", "1", "--config", "commit.toml"], "bench"),
     ("xarm.wrapper", ["run", "--arm", "xarm", "--duration", "1", "--no-speech", "--quiet"], "xarm"),
 ])
 def test_a_missing_extra_is_one_line_naming_it(tmp_path, mod, argv, extra):
+    (tmp_path / "commit.toml").write_text('[planner]\nmodel = "commit"\n')  # the pomdp_py peer plans this model
     r = subprocess.run([sys.executable, "-c", BLOCKED.format(mod=mod, argv=argv)], capture_output=True, text=True,
                        timeout=120, check=False, cwd=tmp_path)
     assert r.returncode == 2, r.stderr

@@ -1,7 +1,7 @@
-"""The watch model (issue 16, in progress; ``planner.model = "watch"``): rollouts and search.
+"""The watch model (``planner.model = "watch"``, the default planner): rollouts and search.
 
-Not yet the default: these tests pin its pieces (the predicted user, the rollouts, the batched search
-against a plain recursion), not yet the paper's behaviours.
+These tests pin its pieces (the predicted user, the rollouts, the batched search against a plain
+recursion); ``test_when_to_ask.py`` pins the paper's behaviours.
 """
 
 from __future__ import annotations

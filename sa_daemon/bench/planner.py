@@ -7,7 +7,8 @@ the ``ho`` and the ``policy`` methods, every planning step recorded, then evenly
 * to the proven optimum (no budget): ``solve_ms_p50`` / ``solve_ms_p99``;
 * at ``budget_s`` wall-clock: ``agreement_at_budget`` is the fraction whose action is optimal (its exact
   value equals the optimum: ties count as agreement);
-* by pomdp_py's POUCT on the same model with the same budget: ``peer_agreement_at_budget``.
+* by pomdp_py's POUCT on the same model with the same budget: ``peer_agreement_at_budget`` (the peer
+  plans the commit model only, ``planner.model = "commit"``; for the watch model it is not run yet).
 
 ``belief_update_us_p50`` times one joystick update of the belief (MaxEnt IOC + resampling check) for
 the scene's goals, and ``belief_update_us_p50_22goals`` for 22 goals, the paper's complex scene.
@@ -67,11 +68,12 @@ def run_planner_bench(
     """Run the benchmark and return its figures (see module doc)."""
     model = SharedAutonomyModel(cfg)
     solver = Solver(model)
-    snaps = sample_snapshots(scene, cfg, samples)
-    solve_ms, agree, peer_agree, questions, complete = [], 0, 0, 0, 0
+    peer = peer and cfg.planner.model == "commit"
     if peer:
         require("pomdp_py", "bench")  # one line naming the extra, not a traceback
         from .peer import pouct_plan
+    snaps = sample_snapshots(scene, cfg, samples)
+    solve_ms, agree, peer_agree, questions, complete = [], 0, 0, 0, 0
     for i, snap in enumerate(snaps):
         full = solver.plan(dataclasses.replace(snap, budget_s=None, node_budget=None))
         solve_ms.append(full.time_ms)
@@ -98,6 +100,7 @@ def run_planner_bench(
         "goals": len(scene.goals),
         "samples": n,
         "budget_s": budget_s,
+        "model": cfg.planner.model,
         "top_goals": cfg.planner.top_goals,
         "max_questions": cfg.planner.max_questions,
         "lookahead_steps": cfg.reward.lookahead_steps,
@@ -123,13 +126,15 @@ def format_table(r: dict) -> str:
         ("solve to proven optimum, p99", f"{r['solve_ms_p99']:.2f} ms", "<= 100 ms"),
         ("solve, max", f"{r['solve_ms_max']:.2f} ms", ""),
         (f"agreement at {r['budget_s']:.2f} s", f"{r['agreement_at_budget']:.3f}", ">= 0.99, > peer"),
-        ("peer (pomdp_py POUCT) agreement", "-" if peer is None else f"{peer:.3f}", ""),
+        ("peer (pomdp_py POUCT) agreement", "-" if peer is None else f"{peer:.3f}",
+         "commit model only" if peer is None and r.get("model") == "watch" else ""),
         ("belief update, p50", f"{r['belief_update_us_p50']:.0f} us", ""),
         ("belief update, 22 goals, p50", f"{r['belief_update_us_p50_22goals']:.0f} us", "<= 200 us"),
         ("decisions that are questions", f"{r['question_fraction']:.3f}", ""),
     ]
     w = max(len(a) for a, _, _ in rows)
-    head = f"planner benchmark: {r['scene']} ({r['goals']} goals, {r['samples']} snapshots, G_m={r['top_goals']})"
+    head = (f"planner benchmark: {r['scene']} ({r['goals']} goals, {r['samples']} snapshots, G_m={r['top_goals']}, "
+            f"{r.get('model', 'commit')} model)")
     return "\n".join([head] + [f"  {a:<{w}}  {b:>12}  {c}" for a, b, c in rows])
 
 

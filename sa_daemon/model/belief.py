@@ -139,7 +139,8 @@ class Belief:
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
         """
         u = _check_finite("user_twist", user_twist, (6,))
-        nll = q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
+        nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
+                                          self.goals.quats_wxyz, cfg)
         free = self._competing()
         if free is None:
             return self._with(self._normalised(self.log_p - nll, cfg.cap))

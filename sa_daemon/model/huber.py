@@ -79,7 +79,13 @@ def q_minus_v_at(
     p1, q1 = integrate_pose(position, quat, np.asarray(user_twist)[..., None, :], T)
     d_t1 = np.sqrt(np.sum((goal_positions - p1) ** 2, axis=-1))
     d_r1 = quat_angle(goal_quats, q1)
-    cost = T * (huber_slope(d_t, cfg.translation) + huber_slope(d_r, cfg.rotation))
+    if cfg.step_cost == "path":
+        u = np.asarray(user_twist)[..., None, :]
+        speed_t = np.sqrt(np.sum(u[..., :3] ** 2, axis=-1))
+        speed_r = np.sqrt(np.sum(u[..., 3:] ** 2, axis=-1))
+        cost = T * (huber_slope(d_t, cfg.translation) * speed_t + huber_slope(d_r, cfg.rotation) * speed_r)
+    else:
+        cost = T * (huber_slope(d_t, cfg.translation) + huber_slope(d_r, cfg.rotation))
     q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
     return q_val - v
 

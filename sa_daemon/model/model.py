@@ -22,7 +22,7 @@ from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
 from .methods import MethodSpec, method_spec
 from .reward import opposes
-from .twists import blend, ho_goal_twists, ho_twist, move_twist
+from .twists import blend, ho_robot_twist, move_twist
 
 ZERO_TWIST = np.zeros(6)
 
@@ -140,9 +140,8 @@ class SharedAutonomyModel:
             kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
             return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
         if action.kind is ActionKind.HO:
-            grads = ho_goal_twists(pose.position, pose.quat_wxyz, user_twist, goals.positions,
-                                   goals.quats_wxyz, self.cfg)
-            return ho_twist(np.asarray(probs), grads)
+            return ho_robot_twist(pose.position, pose.quat_wxyz, user_twist, goals.positions, goals.quats_wxyz,
+                                  np.asarray(probs), self.cfg)
         return ZERO_TWIST.copy()
 
     def command(

@@ -2,9 +2,9 @@
 
 * move-to-goal ``g``: proportional twist toward ``k_c``, saturated (translation along ``k_c - x``, rotation
   along the axis-angle of the relative rotation);
-* HO: the belief-weighted mean of one twist per goal: the negative gradient of the goal's ``Q``
-  (:mod:`.huber`, ``ho.generator = "gradient"``, Javdani et al.) or the goal's move-to-goal twist
-  (``"moves"``: the same kind of generator per goal as the move actions, Fig. 1);
+* HO: the belief-weighted mean of the goals' negative ``Q`` gradients (:mod:`.huber`,
+  ``ho.generator = "gradient"``, Javdani et al.), or the move generator applied to the belief-weighted
+  mean error (``"moves"``: the same kind of generator as the move actions, Fig. 1);
 * no-assist: zero robot twist, the user's twist passes unscaled;
 * question: the robot holds still while the question is asked.
 
@@ -73,37 +73,48 @@ def move_angular(quat: FloatArray, goal_quat: FloatArray, cfg: MoveConfig) -> Fl
     return clip_norm(cfg.angular_gain * rotation_error(goal_quat, quat), cfg.angular_max_radps)
 
 
-def ho_goal_twists(
+def ho_robot_twist(
     position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
-    goal_quats: FloatArray, cfg: Config,
+    goal_quats: FloatArray, weights: FloatArray, cfg: Config,
 ) -> FloatArray:
-    """The per-goal twists HO averages (m/s, rad/s), ``(..., G, 6)``, by ``cfg.ho.generator``.
+    """HO's robot twist (m/s, rad/s) under belief ``weights`` ``(G,)``, by ``cfg.ho.generator``, taken
+    at the pose after the user's twist for ``action_apply_time_s``, toward each goal's lowest-value pose.
 
-    ``"gradient"``: ``-dQ_g/du`` at the pose after the user's twist (:func:`.huber.goal_gradients`);
-    ``"moves"``: :func:`move_twist` toward each goal, from the pose after the user's twist likewise.
-    Goal arrays are ``(G, K, ...)`` (each goal's lowest-value pose) or ``(G, ...)`` (one pose per goal).
+    ``"gradient"``: the belief-weighted mean of ``-dQ_g/du`` (:func:`.huber.goal_gradients`, Javdani et al.);
+    ``"moves"``: the move-to-goal generator applied to the belief-weighted mean of the per-goal errors
+    (gain times the expected error, then the same saturation as a move), so HO and a move toward one
+    goal have the same gain and top speed (Fig. 1 gives the goals and their distribution generators of one
+    kind). Goal arrays are ``(G, K, ...)`` or ``(G, ...)``.
     """
+    w = np.asarray(weights, dtype=float)
     if cfg.ho.generator == "gradient":
-        return goal_gradients(position, quat, user_twist, goal_positions, goal_quats, cfg.intent, cfg.ho)
+        return ho_twist(w, goal_gradients(position, quat, user_twist, goal_positions, goal_quats, cfg.intent, cfg.ho))
     p1, q1 = integrate_pose(position, quat, user_twist, cfg.intent.action_apply_time_s)
     gp, gq = nearest_goal_poses(p1, q1, goal_positions, goal_quats, cfg.intent)
-    return move_twist(p1[..., None, :], q1[..., None, :], gp, gq, cfg.move)
+    return np.concatenate((ho_linear(p1, gp, w, cfg), ho_angular(q1, gq, w, cfg)), axis=-1)
 
 
-def ho_goal_linear(position: FloatArray, goal_positions: FloatArray, cfg: Config) -> FloatArray:
-    """The linear part of :func:`ho_goal_twists` for one pose per goal, ``(..., G, 3)`` (m/s), from
-    ``position`` ``(..., 3)`` already moved by the user's twist: it depends on the position alone."""
+def ho_linear(position: FloatArray, goal_positions: FloatArray, weights: FloatArray, cfg: Config) -> FloatArray:
+    """The linear part of :func:`ho_robot_twist` (m/s) from ``position`` ``(..., 3)`` already moved by the
+    user's twist, one pose per goal ``(G, 3)``, belief ``weights`` broadcasting to ``(..., G)``: it
+    depends on the position alone. Returns ``(..., 3)``."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    w = w / np.sum(w, axis=-2, keepdims=True)
     if cfg.ho.generator == "gradient":
-        return assistance_linear(position[..., None, :], goal_positions, cfg.intent, cfg.ho)
-    return move_linear(position[..., None, :], goal_positions, cfg.move)
+        return np.sum(w * assistance_linear(position[..., None, :], goal_positions, cfg.intent, cfg.ho), axis=-2)
+    error = np.sum(w * (goal_positions - np.asarray(position)[..., None, :]), axis=-2)
+    return clip_norm(cfg.move.linear_gain * error, cfg.move.linear_max_mps)
 
 
-def ho_goal_angular(quat: FloatArray, goal_quats: FloatArray, cfg: Config) -> FloatArray:
-    """The angular part of :func:`ho_goal_twists` for one pose per goal, ``(..., G, 3)`` (rad/s), from
-    ``quat`` ``(..., 4)`` already turned by the user's twist: it depends on the orientation alone."""
+def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cfg: Config) -> FloatArray:
+    """The angular part of :func:`ho_robot_twist` (rad/s), from ``quat`` ``(..., 4)`` already turned by the
+    user's twist; like :func:`ho_linear`, it depends on the orientation alone."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    w = w / np.sum(w, axis=-2, keepdims=True)
     if cfg.ho.generator == "gradient":
-        return assistance_angular(quat[..., None, :], goal_quats, cfg.intent, cfg.ho)
-    return move_angular(quat[..., None, :], goal_quats, cfg.move)
+        return np.sum(w * assistance_angular(quat[..., None, :], goal_quats, cfg.intent, cfg.ho), axis=-2)
+    error = np.sum(w * rotation_error(goal_quats, np.asarray(quat)[..., None, :]), axis=-2)
+    return clip_norm(cfg.move.angular_gain * error, cfg.move.angular_max_radps)
 
 
 def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:

@@ -28,7 +28,7 @@ from ..geometry import FloatArray, integrate_pose, quat_angle
 from ..model.actions import Action, ActionKind
 from ..model.model import SharedAutonomyModel
 from ..model.reward import distance_reward, opposes, opposition_reward
-from ..model.twists import blend, ho_goal_twists, ho_twist, move_twist
+from ..model.twists import blend, ho_robot_twist, move_twist
 from .snapshot import Snapshot
 
 
@@ -71,8 +71,7 @@ class Problem:
                 pos[self._is_goal], quat[self._is_goal], self._gp, self._gq, cfg.move
             )
         if self._ho >= 0:
-            grads = ho_goal_twists(pos[self._ho], quat[self._ho], self.u, self.kp, self.kq, cfg)
-            out[self._ho] = ho_twist(self.b0, grads)
+            out[self._ho] = ho_robot_twist(pos[self._ho], quat[self._ho], self.u, self.kp, self.kq, self.b0, cfg)
         return out
 
     def _move_rewards(self) -> FloatArray:

@@ -38,8 +38,8 @@ from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_at
 from ..model.reward import distance_reward, opposes
 from ..model.twists import (
-    ho_goal_angular,
-    ho_goal_linear,
+    ho_angular,
+    ho_linear,
     move_angular,
     move_linear,
     pregrasp_points,
@@ -77,11 +77,11 @@ class Rollouts:
         move_m = is_move[None, None, :, None]
         none_m = is_none[None, None, :, None]
         alpha = cfg.blend.alpha
-        w = weights[:, None, :, None]  # (C, 1, G, 1): HO's belief
+        w = weights[:, None, :]  # (C, 1, G): HO's belief
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
-        samples = cfg.runtime.belief_hz * dt
+        samples = cfg.runtime.belief_hz * dt * cfg.intent.rationality
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
         loglik = np.zeros((C, G, A, G))
@@ -104,11 +104,11 @@ class Rollouts:
             u_ang = zero if translating else user_angular(Q, gq, speed[1])
             r_lin = np.where(move_m, move_linear(P, mp, cfg.move), 0.0)
             r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
-            for i in ho:  # HO: the belief-weighted per-goal generator, after the user's twist
+            for i in ho:  # HO under the start's belief, after the user's twist
                 p1 = P[:, :, i] + (u_lin[:, :, i] if translating else 0.0) * t_apply
                 q1 = Q[:, :, i] if translating else turn(Q[:, :, i], u_ang[:, :, i], t_apply)
-                r_lin[:, :, i] = np.sum(w * ho_goal_linear(p1, kp, cfg), axis=2)
-                r_ang[:, :, i] = np.sum(w * ho_goal_angular(q1, kq, cfg), axis=2)
+                r_lin[:, :, i] = ho_linear(p1, kp, w, cfg)
+                r_ang[:, :, i] = ho_angular(q1, kq, w, cfg)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)

@@ -18,6 +18,8 @@ for evaluation), or when the optimum is proven: an iteration in which no node wa
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import time
 from dataclasses import dataclass
@@ -282,8 +284,11 @@ class Solver:
     def action_values(self, snap: Snapshot) -> dict[Action, float]:
         """Exact value of every root action (then optimal play).
 
-        For benchmarks and tests: a planner's choice is optimal iff its value equals the maximum.
+        For benchmarks and tests: a planner's choice is optimal iff its value equals the maximum. The watch
+        model's search is exhaustive: its values are those of an unbudgeted plan.
         """
+        if self.model.cfg.planner.model == "watch":
+            return plan_watch(self.model, dataclasses.replace(snap, budget_s=None, node_budget=None)).root_values
         prob = Problem(self.model, snap)
         s = _Search(prob, math.inf, None, self.model.cfg.planner.bound_levels)
         b0 = prob.b0

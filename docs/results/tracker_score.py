@@ -1,0 +1,64 @@
+"""Score the belief tracker alone on manual trials: the mean log probability of the true target.
+
+    python docs/results/tracker_score.py [--config FILE ...] [--seeds 2] [--jobs 2]
+
+With no assistance (method ``manual``) the arm goes where the simulated user drives it whatever the belief,
+so these trials measure the tracker without the planner. For every built-in user, every task of the suites
+(``sa_daemon.sim.suites``) and every seed, the tracker's target probabilities are read at each plan instant
+(0.1 s); the score is the mean of ``log p(true target)`` (a proper scoring rule: confident misreadings cost
+most), with the share of instants where the true target is the most likely and the worst trial's mean. Each
+``--config`` is scored in turn (``-`` is the built-in defaults). ``docs/model.md`` ("The tracker") chose
+``intent.rationality`` with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from sa_daemon.config import load_config
+from sa_daemon.sim.episode import run_trial
+from sa_daemon.sim.suites import SUITES
+from sa_daemon.sim.users import builtin_user_names, load_user
+from sa_daemon.world.scene import load_scene
+
+
+def score_trial(job: tuple[str, str, str, str, int]) -> tuple[str, float, float]:
+    """``(task, mean log p(true target), share of instants the true target leads)`` of one manual trial."""
+    config, scene_name, task, user, seed = job
+    cfg = load_user(user).apply(load_config(None if config == "-" else config))
+    rows: list[tuple[float, bool]] = []
+
+    def on_plan(snap, _result) -> None:
+        tp = snap.goals.target_probabilities(snap.probs)
+        rows.append((float(np.log(max(tp[task], 1e-6))), max(tp, key=tp.get) == task))
+
+    run_trial(load_scene(scene_name), task, "manual", seed, cfg, on_plan=on_plan, user_name=user)
+    logp, lead = np.array(rows).T
+    return task, float(logp.mean()), float(lead.mean())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", action="append", default=None, help="config.toml to score ('-': defaults)")
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2)
+    args = ap.parse_args()
+    cells = sorted({(part.scene, task) for s in SUITES.values() for part in s.parts for task in part.tasks})
+    for config in args.config or ["-"]:
+        jobs = [(config, scene, task, user, seed) for scene, task in cells for user in builtin_user_names()
+                for seed in range(args.seeds)]
+        with ProcessPoolExecutor(args.jobs) as pool:
+            res = list(pool.map(score_trial, jobs))
+        logp = np.array([r[1] for r in res])
+        print(f"{config}: {len(res)} manual trials; mean log p(true target) {logp.mean():.3f}, "
+              f"true target leads {np.mean([r[2] for r in res]):.3f}, worst trial {logp.min():.2f}")
+        for task in sorted({r[0] for r in res}):
+            mine = [r for r in res if r[0] == task]
+            print(f"    {task:28s} {np.mean([r[1] for r in mine]):7.3f} {np.mean([r[2] for r in mine]):6.3f}")
+
+
+if __name__ == "__main__":
+    main()
