@@ -29,9 +29,24 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
         "correct_prediction_rate", "questions")
 
 
+BEFORE_THE_KEY = {
+    "planner": {"model": "commit"},
+    "intent": {"step_cost": "time", "rationality": 1.0},
+    "ho": {"generator": "gradient"},
+    "reward": {"question_time_s": 0.0},
+}
+"""Keys whose default changed after files were recorded without them: a file that lacks one ran with the
+behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
+move-generator HO the defaults, and a question's time 2.5 s)."""
+
+
 def _config(recorded: dict) -> Config:
-    """The recorded configuration, keeping only the keys the current code knows (new keys take their
-    defaults; a removed key cannot have changed the trials of the current code)."""
+    """The recorded configuration, keeping only the keys the current code knows. Keys the file lacks take
+    their value from before they existed (``BEFORE_THE_KEY``), or else their defaults (a removed key
+    cannot have changed the trials of the current code)."""
+    recorded = {**recorded}
+    for section, keys in BEFORE_THE_KEY.items():
+        recorded[section] = {**keys, **recorded.get(section, {})}
     current = Config().model_dump(mode="json")
 
     def keep(rec: dict, cur: dict) -> dict:

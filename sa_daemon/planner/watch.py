@@ -50,6 +50,17 @@ MAX_BATCH = 20_000
 """Beliefs one question level may hold; a deeper level than this is not searched (a depth limit)."""
 
 
+def _answer_keys(start: np.ndarray, asked: np.ndarray, yes: np.ndarray) -> np.ndarray:
+    """One key per node from its start pose and its answer sets: a 1-D ``int64`` (start, asked bits,
+    yes bits) when they fit in 62 bits, else rows of bytes. Equal keys, equal beliefs."""
+    nq = asked.shape[1]
+    if 2 * nq + int(start.max(initial=0)).bit_length() <= 62:
+        weights = np.left_shift(np.int64(1), np.arange(nq, dtype=np.int64))
+        return (start.astype(np.int64) << (2 * nq)) | ((asked @ weights) << nq) | (yes @ weights)
+    return np.concatenate((start[:, None].astype(np.int64).view(np.uint8).reshape(len(start), -1),
+                           np.packbits(asked, axis=1), np.packbits(yes, axis=1)), axis=1)
+
+
 class WatchSearch:
     """One snapshot's watch-model problem and its search (module doc)."""
 
@@ -142,8 +153,8 @@ class WatchSearch:
         kid_c = np.concatenate((c[node], c[node]))
         kid_a = np.concatenate((asked[node] | eye[q], asked[node] | eye[q]))
         kid_y = np.concatenate((yes[node] | eye[q], yes[node]))
-        keys = np.concatenate((kid_c[:, None], np.packbits(kid_a, axis=1), np.packbits(kid_y, axis=1)), axis=1)
-        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        _, first, inverse = np.unique(_answer_keys(kid_c, kid_a, kid_y), axis=0, return_index=True,
+                                      return_inverse=True)
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
