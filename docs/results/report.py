@@ -68,7 +68,44 @@ def report(path: Path) -> str:
                 cells += [f"{s.paper_questions[task]:.2f}"]
             lines.append("| " + " | ".join(cells) + " |")
         out += lines + [""]
+    out += asking(data["trials"])
     return "\n".join(out)
+
+
+def _mean(xs: list) -> str:
+    xs = [x for x in xs if x is not None]
+    return f"{sum(xs) / len(xs):.2f}" if xs else "-"
+
+
+def asking(trials: list[dict]) -> list[str]:
+    """Issue 16's measures of policy's questions per user over the suite's tasks: questions a task (mean,
+    largest in one trial), share asked with the belief within 10 % of uniform, share about one of the two
+    most likely objects, time of the first question, share of HO or no-assist plans in the first 2 s."""
+    pol = [t for t in trials if t["method"] == "policy" and t.get("asked") is not None]
+    if not pol:
+        return []
+    out = []
+    for by in ("user", "task"):
+        pooled = "all tasks" if by == "user" else "all users"
+        out += [f"Policy's questions per {by} (issue 16's measures; {pooled} pooled):", ""]
+        out += _asking_table(pol, by) + [""]
+    return out
+
+
+def _asking_table(pol: list[dict], by: str) -> list[str]:
+    head = (f"| {by} | trials | questions a task | most in a trial | near uniform | about a top-2 object | "
+            "first question (s) | early plans HO or none |")
+    lines = [head, "|" + "---|" * 8]
+    for key in dict.fromkeys(t[by] for t in pol):
+        mine = [t for t in pol if t[by] == key]
+        asked = [q for t in mine for q in t["asked"]]
+        early = [t["early_plans"] for t in mine if t.get("early_plans")]
+        passive = [sum(n for a, n in e.items() if a in ("ho", "none")) / max(1, sum(e.values())) for e in early]
+        lines.append("| " + " | ".join([
+            f"`{key}`" if by == "task" else key, str(len(mine)), _mean([len(t["asked"]) for t in mine]), str(max(len(t["asked"]) for t in mine)),
+            _mean([q["over_uniform"] < 1.1 for q in asked]), _mean([q["object_rank"] <= 2 for q in asked]),
+            _mean([t["asked"][0]["t"] if t["asked"] else None for t in mine]), _mean(passive)]) + " |")
+    return lines
 
 
 if __name__ == "__main__":

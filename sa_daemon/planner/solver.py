@@ -19,7 +19,6 @@ for evaluation), or when the optimum is proven: an iteration in which no node wa
 from __future__ import annotations
 
 import dataclasses
-
 import math
 import time
 from dataclasses import dataclass
