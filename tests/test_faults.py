@@ -795,9 +795,9 @@ def test_sound_player_failing_then_hanging_leaves_questions_answerable_and_nothi
         while len(pids.read_text().split()) < 2:  # the player of question 2 is running (and hangs)
             assert time.monotonic() < deadline, "the player was never started for question 2"
             time.sleep(0.05)
-        q3, a3 = ask_and_answer(d, c.event("answer", start=i_hang, goal=q2["goal"])[0], timeout_s=120)
         hung = int(pids.read_text().split()[1])
-        assert not process_gone(hung)
+        assert not process_gone(hung)  # hanging (the next question's playback may end it; the daemon's stop must)
+        q3, a3 = ask_and_answer(d, c.event("answer", start=i_hang, goal=q2["goal"])[0], timeout_s=120)
         _, s = c.state(lambda s: s["t"] > a3["t"] + 2.0, timeout_s=10)
         t_term = time.monotonic()
         assert d.stop(timeout_s=20) == 0
