@@ -240,6 +240,13 @@ def test_a_spoken_yes_answers_the_pending_question_end_to_end(tmp_path, wavs):
     fifo = tmp_path / "mic.fifo"
     os.mkfifo(fifo)
     config = f"""
+# the commit model asks early and often: the question this test answers by voice comes in good time
+[planner]
+model = "commit"
+
+[reward]
+question_time_s = 0.0
+
 [sim_user]
 answer_delay_s = 1000.0
 
