@@ -28,6 +28,10 @@ CLI = [sys.executable, "-m", "sa_daemon.cli"]
 #: The real CLI with fakes at the hardware boundaries, driven over stdin (``tests/faultd.py``).
 FAULTD = Path(__file__).with_name("faultd.py")
 START_TIMEOUT_S = 60.0
+#: The commit model with the paper's question cost: it asks early and often (about 3 questions on Scene 1
+#: ``cup:top``), so tests of the question machinery (speech, answers, the protocol) and of the pomdp_py peer,
+#: which plans this model, get what they need in good time; the default planner asks about once a task.
+COMMIT_MODEL_TOML = '[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n'
 DEFAULT_RUN = ("--arm", "kinematic", "--input", "sim", "--scene", "scene1", "--task", "cup:top")
 
 

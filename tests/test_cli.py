@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import SUMMARY_KEYS, TRIAL_KEYS
+from helpers import COMMIT_MODEL_TOML, SUMMARY_KEYS, TRIAL_KEYS
 
 TIMEOUT_S = 180
 BENCH_KEYS = ("solve_ms_p50", "solve_ms_p99", "agreement_at_budget", "peer_agreement_at_budget", "belief_update_us_p50")
@@ -134,7 +134,7 @@ def bench_runs(tmp_path_factory):
     """Both planner benchmarks, run at the same time (each takes seconds)."""
     d = tmp_path_factory.mktemp("bench")
     commit = d / "commit.toml"  # the pomdp_py peer plans the commit model
-    commit.write_text('[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n')
+    commit.write_text(COMMIT_MODEL_TOML)
     jobs = {
         "no_peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "4", "--no-peer",
                          "--json", str(d / "no_peer.json")), d / "no_peer.json"),

@@ -20,7 +20,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zmq
-from helpers import CLI, START_TIMEOUT_S, DaemonProc, free_port, process_gone, wav_stats
+from helpers import (
+    CLI,
+    COMMIT_MODEL_TOML,
+    START_TIMEOUT_S,
+    DaemonProc,
+    free_port,
+    process_gone,
+    wav_stats,
+)
 
 from sa_daemon.config import Config
 from sa_daemon.control.safety import SafetyCode
@@ -35,16 +43,12 @@ STATE_KEYS = {
     "action", "question", "planner", "safety", "safety_codes", "method", "assist", "stopped", "arm", "input", "task",
 }
 
-QUESTIONS_OFTEN = '[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n'
-"""The commit model asks early and often (about 3 questions on cup:top), so the tests of the question
-machinery get two questions in good time; the default planner asks about once a task (docs/model.md)."""
-
 
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory):
     """The policy daemon with speech (WAV files only, no sound card needed)."""
     d = DaemonProc(tmp_path_factory.mktemp("policy"), "--method", "policy", "--duration", "600",
-                   "--speech-wav", "wav", config=QUESTIONS_OFTEN + "[speech]\nplay = false\n")
+                   "--speech-wav", "wav", config=COMMIT_MODEL_TOML + "[speech]\nplay = false\n")
     try:
         d.wait_ready()
         yield d

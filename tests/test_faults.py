@@ -31,6 +31,7 @@ import pytest
 import zmq
 from helpers import (
     CLI,
+    COMMIT_MODEL_TOML,
     FAULTD,
     START_TIMEOUT_S,
     DaemonProc,
@@ -649,15 +650,7 @@ def test_bad_joystick_config_is_refused_even_with_a_stick_plugged(tmp_path):
 
 # -- speech: the engine missing, failing, hanging; the sound player failing, hanging ----------------------
 
-SPEECH_CONFIG = """\
-# The commit model asks early and often, so these tests of the question machinery get their questions
-# in good time; the default planner asks about once a task (docs/model.md).
-[planner]
-model = "commit"
-
-[reward]
-question_time_s = 0.0
-
+SPEECH_CONFIG = COMMIT_MODEL_TOML + """
 [sim_user]
 answer_delay_s = 1000.0
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from helpers import COMMIT_MODEL_TOML
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("protocol_client", ROOT / "examples" / "protocol_client.py")
@@ -182,10 +183,8 @@ def daemon(tmp_path_factory: pytest.TempPathFactory):
     cmd = f"tcp://127.0.0.1:{free_port()}"
     folder = tmp_path_factory.mktemp("daemon")
     log = folder / "daemon.log"
-    # The commit model asks early and often (about 3 questions on cup:top), so a question is pending
-    # within the tests' timeouts; the default planner asks about once a task (docs/model.md).
     config = folder / "config.toml"
-    config.write_text('[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n')
+    config.write_text(COMMIT_MODEL_TOML)  # a question is pending within the tests' timeouts
     args = [exe, "run", "--arm", "kinematic", "--input", "sim", "--scene", "scene1",
             "--task", "cup:top", "--duration", "40", "--pub", pub, "--cmd", cmd,
             "--no-speech", "--quiet", "--config", str(config)]

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import DaemonProc, synth_wavs
+from helpers import COMMIT_MODEL_TOML, DaemonProc, synth_wavs
 
 from sa_daemon.config import VoiceConfig, config_from_dict
 from sa_daemon.speech.audio import (
@@ -224,7 +224,7 @@ BLOCKED = "import sys; sys.modules[{mod!r}] = None\nfrom sa_daemon.cli import ma
     ("xarm.wrapper", ["run", "--arm", "xarm", "--duration", "1", "--no-speech", "--quiet"], "xarm"),
 ])
 def test_a_missing_extra_is_one_line_naming_it(tmp_path, mod, argv, extra):
-    (tmp_path / "commit.toml").write_text('[planner]\nmodel = "commit"\n')  # the pomdp_py peer plans this model
+    (tmp_path / "commit.toml").write_text(COMMIT_MODEL_TOML)  # the pomdp_py peer plans this model
     r = subprocess.run([sys.executable, "-c", BLOCKED.format(mod=mod, argv=argv)], capture_output=True, text=True,
                        timeout=120, check=False, cwd=tmp_path)
     assert r.returncode == 2, r.stderr
@@ -239,14 +239,7 @@ def test_a_missing_extra_is_one_line_naming_it(tmp_path, mod, argv, extra):
 def test_a_spoken_yes_answers_the_pending_question_end_to_end(tmp_path, wavs):
     fifo = tmp_path / "mic.fifo"
     os.mkfifo(fifo)
-    config = f"""
-# the commit model asks early and often: the question this test answers by voice comes in good time
-[planner]
-model = "commit"
-
-[reward]
-question_time_s = 0.0
-
+    config = COMMIT_MODEL_TOML + f"""
 [sim_user]
 answer_delay_s = 1000.0
 
