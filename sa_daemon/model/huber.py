@@ -69,23 +69,23 @@ def q_minus_v_at(
 ) -> FloatArray:
     """``Q_g(x, u) - V_g(x)`` against one pose per goal, ``(G, 3)``/``(G, 4)``, for poses ``(..., 3)``,
     ``(..., 4)`` and twists ``(..., 6)``: shape ``(..., G)``. ``Q`` applies ``u`` for
-    ``action_apply_time_s`` and adds that time times the slope of ``V`` (the step cost)."""
+    ``action_apply_time_s`` and adds the step's cost: that time times the slope of ``V`` (``step_cost =
+    "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``)."""
     T = cfg.action_apply_time_s
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
+    u = np.asarray(user_twist)[..., None, :]
     diff = goal_positions - position
     d_t = np.sqrt(np.sum(diff * diff, axis=-1))
     d_r = quat_angle(goal_quats, quat)
     v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
-    p1, q1 = integrate_pose(position, quat, np.asarray(user_twist)[..., None, :], T)
+    p1, q1 = integrate_pose(position, quat, u, T)
     d_t1 = np.sqrt(np.sum((goal_positions - p1) ** 2, axis=-1))
     d_r1 = quat_angle(goal_quats, q1)
     if cfg.step_cost == "path":
-        u = np.asarray(user_twist)[..., None, :]
-        speed_t = np.sqrt(np.sum(u[..., :3] ** 2, axis=-1))
-        speed_r = np.sqrt(np.sum(u[..., 3:] ** 2, axis=-1))
-        cost = T * (huber_slope(d_t, cfg.translation) * speed_t + huber_slope(d_r, cfg.rotation) * speed_r)
+        per_t, per_r = np.sqrt(np.sum(u[..., :3] ** 2, axis=-1)), np.sqrt(np.sum(u[..., 3:] ** 2, axis=-1))
     else:
-        cost = T * (huber_slope(d_t, cfg.translation) + huber_slope(d_r, cfg.rotation))
+        per_t = per_r = 1.0
+    cost = T * (huber_slope(d_t, cfg.translation) * per_t + huber_slope(d_r, cfg.rotation) * per_r)
     q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
     return q_val - v
 

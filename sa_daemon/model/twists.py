@@ -94,12 +94,17 @@ def ho_robot_twist(
     return np.concatenate((ho_linear(p1, gp, w, cfg), ho_angular(q1, gq, w, cfg)), axis=-1)
 
 
+def _goal_weights(weights: FloatArray) -> FloatArray:
+    """Belief ``weights`` ``(..., G)`` normalised over the goals, as ``(..., G, 1)`` to scale per-goal vectors."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    return w / np.sum(w, axis=-2, keepdims=True)
+
+
 def ho_linear(position: FloatArray, goal_positions: FloatArray, weights: FloatArray, cfg: Config) -> FloatArray:
     """The linear part of :func:`ho_robot_twist` (m/s) from ``position`` ``(..., 3)`` already moved by the
     user's twist, one pose per goal ``(G, 3)``, belief ``weights`` broadcasting to ``(..., G)``: it
     depends on the position alone. Returns ``(..., 3)``."""
-    w = np.asarray(weights, dtype=float)[..., None]
-    w = w / np.sum(w, axis=-2, keepdims=True)
+    w = _goal_weights(weights)
     if cfg.ho.generator == "gradient":
         return np.sum(w * assistance_linear(position[..., None, :], goal_positions, cfg.intent, cfg.ho), axis=-2)
     error = np.sum(w * (goal_positions - np.asarray(position)[..., None, :]), axis=-2)
@@ -109,8 +114,7 @@ def ho_linear(position: FloatArray, goal_positions: FloatArray, weights: FloatAr
 def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cfg: Config) -> FloatArray:
     """The angular part of :func:`ho_robot_twist` (rad/s), from ``quat`` ``(..., 4)`` already turned by the
     user's twist; like :func:`ho_linear`, it depends on the orientation alone."""
-    w = np.asarray(weights, dtype=float)[..., None]
-    w = w / np.sum(w, axis=-2, keepdims=True)
+    w = _goal_weights(weights)
     if cfg.ho.generator == "gradient":
         return np.sum(w * assistance_angular(quat[..., None, :], goal_quats, cfg.intent, cfg.ho), axis=-2)
     error = np.sum(w * rotation_error(goal_quats, np.asarray(quat)[..., None, :]), axis=-2)
