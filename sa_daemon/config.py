@@ -155,6 +155,11 @@ class PlannerConfig(_Section):
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
+    ho_belief: Literal["tracked", "fixed"] = Field(
+        "tracked",
+        description="watch model: HO in a rollout follows the belief the tracker reaches from the predicted input "
+        "(tracked, as the daemon's HO does) or keeps the plan's belief (fixed)",
+    )
     user_standoff_m: float = Field(
         0.06, ge=0, le=0.3,
         description="watch model: the predicted user translates to this far behind a grasp along its approach first (m)",

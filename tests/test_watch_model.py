@@ -10,10 +10,17 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import config_from_dict
-from sa_daemon.geometry import Pose
+from sa_daemon.geometry import Pose, quat_angle, turn
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
+from sa_daemon.model.huber import q_minus_v_at
 from sa_daemon.model.model import SharedAutonomyModel
-from sa_daemon.model.twists import pregrasp_points, user_angular, user_linear
+from sa_daemon.model.twists import (
+    ho_angular,
+    ho_linear,
+    pregrasp_points,
+    user_angular,
+    user_linear,
+)
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
@@ -203,3 +210,71 @@ def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitme
     best = max(float(s.b0 @ stand_then[:, a]) for a in range(len(s.moves)))
     assert watched[NO_ASSIST] == pytest.approx(best, rel=1e-3)
     assert watched[NO_ASSIST] > values[NO_ASSIST]  # standing all along is worse: an idle arm gains nothing
+
+
+# -- HO in a rollout follows the tracked belief -----------------------------------------------------------
+
+
+def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, dt):
+    """One HO rollout for a user heading to goal ``g``, one step at a time: HO's belief starts at ``b0``
+    and after every step takes the tracker's MaxEnt IOC update for that step's predicted input
+    (``belief_hz x dt`` samples, rationality ``beta``). Returns the pose after ``steps`` and the belief."""
+    log_b = np.log(b0)
+    p, q = np.array(position, dtype=float), np.array(quat, dtype=float)
+    standoff, alpha, T = cfg.planner.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s
+    for _ in range(steps):
+        u = np.zeros(6)
+        if mode is Mode.TRANSLATION:
+            u[:3] = user_linear(p, kp[g], pregrasp_points(kp[g], kq[g], standoff), speed[0], standoff)
+        else:
+            u[3:] = user_angular(q, kq[g], speed[1])
+        b = np.exp(log_b - log_b.max())
+        robot = np.concatenate((ho_linear(p + u[:3] * T, kp, b, cfg), ho_angular(turn(q, u[3:], T), kq, b, cfg)))
+        log_b = log_b - cfg.runtime.belief_hz * dt * cfg.intent.rationality * q_minus_v_at(p, q, u, kp, kq, cfg.intent)
+        twist = (1.0 - alpha) * u + alpha * robot
+        p, q = p + twist[:3] * dt, turn(q, twist[3:], dt)
+    b = np.exp(log_b - log_b.max())
+    return p, q, b / b.sum()
+
+
+@pytest.mark.parametrize("mode, speed", [(Mode.TRANSLATION, (0.05, 0.0)), (Mode.ROTATION, (0.0, 0.3))])
+def test_ho_in_a_rollout_follows_the_belief_the_predicted_input_gives(mode, speed):
+    """``planner.ho_belief = "tracked"`` (default): the batched rollouts move HO exactly as a plain loop
+    that updates HO's belief after every step, for every goal the user may head to; and that belief
+    grows on the user's goal, so HO ends nearer it than HO under the plan's fixed belief does."""
+    cfg = _cfg()
+    snap = _snap()
+    goals, pose, steps, dt = snap.goals, snap.pose, 4, 0.5
+    kp, kq = goals.desired_poses(pose, cfg.intent.rotation_weight_m_per_rad)
+    actions = [HO_ACTION, NO_ASSIST]
+
+    def ho_poses(c):
+        R = Rollouts(c, pose.position[None], pose.quat_wxyz[None], snap.probs[None], kp, kq, actions, mode, speed,
+                     steps=steps, dt=dt, watch_steps=steps)
+        n = len(goals)
+        return (np.broadcast_to(R.watch_positions[0, :, 0], (n, 3)), np.broadcast_to(R.watch_quats[0, :, 0], (n, 4)))
+
+    P, Q = ho_poses(cfg)
+    fixed = cfg.model_copy(update={"planner": cfg.planner.model_copy(update={"ho_belief": "fixed"})})
+    P_fixed, Q_fixed = ho_poses(fixed)
+    for g in range(len(goals)):
+        p, q, b = _ho_rollout_by_hand(cfg, kp, kq, snap.probs, pose.position, pose.quat_wxyz, g, mode, speed,
+                                      steps, dt)
+        assert np.allclose(P[g], p, atol=1e-12) and np.allclose(Q[g], q, atol=1e-12), g
+        assert b[g] > snap.probs[g]
+        if mode is Mode.TRANSLATION:
+            assert np.linalg.norm(P[g] - kp[g]) < np.linalg.norm(P_fixed[g] - kp[g]), g
+        else:
+            assert quat_angle(Q[g], kq[g]) < quat_angle(Q_fixed[g], kq[g]), g
+
+
+def test_with_an_idle_user_tracked_and_fixed_ho_are_the_same_rollouts():
+    """No input, no evidence (path step cost): HO's tracked belief stays the plan's."""
+    cfg = _cfg()
+    fixed = cfg.model_copy(update={"planner": cfg.planner.model_copy(update={"ho_belief": "fixed"})})
+    snap = _snap(speed=(0.0, 0.0))
+    kp, kq = snap.goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad)
+    values = [Rollouts(c, snap.pose.position[None], snap.pose.quat_wxyz[None], snap.probs[None], kp, kq,
+                       [HO_ACTION, NO_ASSIST], Mode.TRANSLATION, (0.0, 0.0), steps=5, dt=1.0).value
+              for c in (cfg, fixed)]
+    assert np.allclose(values[0], values[1], rtol=0, atol=1e-9)

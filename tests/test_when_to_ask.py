@@ -84,6 +84,18 @@ def test_at_the_start_ho_is_not_dominated_by_any_move():
             assert np.any(values[:, ho] > values[:, i]), a
 
 
+def test_at_the_start_ho_is_chosen_while_the_user_drives_and_the_belief_is_uniform():
+    """Table II: HO at the start. HO in the search follows the belief the user's input will give (the
+    daemon's HO does), so a second of HO toward the spread belief then HO toward the emerging goal beats
+    committing a second to one object; with the plan's belief frozen in the rollouts a move wins."""
+    uniform = np.full(len(GOALS), 1.0 / len(GOALS))
+    r = plan(uniform)
+    assert r.action.kind is ActionKind.HO, r.action
+    frozen = Config().model_copy(update={"planner": Config().planner.model_copy(update={"ho_belief": "fixed"})})
+    snap = Snapshot(GOALS, uniform, SCENE.start, np.zeros(6), user_speed=WALKING)
+    assert Solver(SharedAutonomyModel(frozen)).plan(snap).action.kind is ActionKind.MOVE
+
+
 NEAR_CUP = Pose(np.array([0.44, -0.03, 0.31]), np.array([0.015, 0.87, -0.075, 0.49]) / np.linalg.norm([0.015, 0.87, -0.075, 0.49]))
 """Where the calibrated user, driving to the cup, switches to rotation (a recorded trial, rounded)."""
 

@@ -3,8 +3,10 @@
 A rollout is one start ``c``, one goal ``g`` the user heads to and one motion action ``a`` (move-to-goal,
 HO, no-assist). At every step of ``dt`` seconds the user's twist is the one predicted for a user
 heading to ``g`` (:func:`~..model.twists.user_linear` / ``user_angular``: current mode, smoothed speed), the robot's
-twist is ``a``'s velocity generator (HO weighted by the start's belief), and the pose moves by their
-blend (the user's twist alone for no-assist). Recorded per rollout and step ``s``:
+twist is ``a``'s velocity generator, and the pose moves by their blend (the user's twist alone for
+no-assist). HO is weighted by *its* belief: the start's, then after every step the tracker's update with
+that step's predicted input (``planner.ho_belief = "tracked"``, as the daemon's HO follows the belief
+while the user drives), or the start's all along (``"fixed"``). Recorded per rollout and step ``s``:
 
 * ``value[c, g, a, s]``: the return of section III-E's reward over the first ``s`` steps, undiscounted,
   for goal ``g``: per paper step (``reward.step_s``) the distance reward ``R_d`` to ``g``'s ``k_c`` at
@@ -25,7 +27,8 @@ Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 part on the orientation alone, and the user drives one of the two. So in translation mode the
 orientation of a rollout does not depend on ``g`` and is integrated once per ``(c, a)``; in rotation
 mode the position is. The quaternion work, the expensive part, is then ``G`` times smaller in
-translation mode.
+translation mode. Tracked HO depends on ``g`` through its belief in both parts, so with it both arrays
+hold ``G`` rollouts; the moves' angular twist is still computed once per ``(c, a)`` in translation mode.
 """
 
 from __future__ import annotations
@@ -68,16 +71,20 @@ class Rollouts:
         ho = [i for i, k in enumerate(kind) if k is ActionKind.HO]
         mp = kp[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]  # (A, 3) move targets
         mq = kq[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]
-        # Positions vary with the user's goal in translation mode, orientations in rotation mode.
-        P = np.broadcast_to(positions[:, None, None, :], (C, G if translating else 1, A, 3)).copy()
-        Q = np.broadcast_to(quats[:, None, None, :], (C, 1 if translating else G, A, 4)).copy()
+        # Positions vary with the user's goal in translation mode, orientations in rotation mode; both do
+        # when HO follows the tracked belief, which depends on the goal.
+        tracked = bool(ho) and cfg.planner.ho_belief == "tracked"
+        P = np.broadcast_to(positions[:, None, None, :], (C, G if translating or tracked else 1, A, 3)).copy()
+        Q = np.broadcast_to(quats[:, None, None, :], (C, 1 if translating and not tracked else G, A, 4)).copy()
         gp, gq = kp[None, :, None, :], kq[None, :, None, :]  # the user's goals, (1, G, 1, .)
         standoff = cfg.planner.user_standoff_m
         pre = pregrasp_points(kp, kq, standoff)[None, :, None, :]
         move_m = is_move[None, None, :, None]
         none_m = is_none[None, None, :, None]
         alpha = cfg.blend.alpha
-        w = weights[:, None, :]  # (C, 1, G): HO's belief
+        # HO's belief, as logs: the start's, then (tracked) per rollout the tracker's update with the
+        # predicted input, (C, 1, G) or (C, G, G)
+        log_w = np.log(np.maximum(weights, 1e-300))[:, None, :]
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
@@ -103,12 +110,20 @@ class Rollouts:
             u_lin = user_linear(P, gp, pre, speed[0], standoff) if translating else zero
             u_ang = zero if translating else user_angular(Q, gq, speed[1])
             r_lin = np.where(move_m, move_linear(P, mp, cfg.move), 0.0)
-            r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
-            for i in ho:  # HO under the start's belief, after the user's twist
+            # (a move's orientation does not depend on g in translation mode, even where Q holds G copies)
+            r_ang = np.where(move_m, move_angular(Q[:, :1] if translating else Q, mq, cfg.move), 0.0)
+            r_ang = np.repeat(r_ang, Q.shape[1] // r_ang.shape[1], axis=1)
+            for i in ho:  # HO under its belief, after the user's twist
+                w = np.exp(log_w - log_w.max(axis=-1, keepdims=True))
                 p1 = P[:, :, i] + (u_lin[:, :, i] if translating else 0.0) * t_apply
                 q1 = Q[:, :, i] if translating else turn(Q[:, :, i], u_ang[:, :, i], t_apply)
                 r_lin[:, :, i] = ho_linear(p1, kp, w, cfg)
                 r_ang[:, :, i] = ho_angular(q1, kq, w, cfg)
+                if tracked and s + 1 < steps:
+                    u = np.zeros((C, G, 6))
+                    u[..., :3] = u_lin[:, :, i] if translating else 0.0
+                    u[..., 3:] = 0.0 if translating else u_ang[:, :, i]
+                    log_w = log_w - samples * q_minus_v_at(P[:, :, i], Q[:, :, i], u, kp, kq, cfg.intent)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)
