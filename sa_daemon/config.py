@@ -181,6 +181,10 @@ class LimitsConfig(_Section):
 
     linear_mps: float = Field(0.25, gt=0, description="per-axis linear speed limit (m/s)")
     angular_radps: float = Field(1.0, gt=0, description="per-axis angular speed limit (rad/s)")
+    tcp_mps: float = Field(
+        0.25, gt=0, le=1.0,
+        description="TCP speed limit, the norm of the linear part (m/s); the xArm controller's reduced TCP speed",
+    )
 
 
 class SimUserConfig(_Section):
@@ -295,6 +299,11 @@ class SafetyConfig(_Section):
         "direction exceeds this (MoveIt Servo: 0)"
     )
     joint_margin_rad: float = Field(0.1, ge=0, description="halt a joint moving toward a bound within this (rad)")
+    stop_self_test: Literal["auto", "on", "off"] = Field(
+        "auto",
+        description="no assistance and no motion until a stop has been latched and resumed once (button, protocol "
+        "or page); auto = on for the real arm, off for the simulated ones",
+    )
 
     @model_validator(mode="after")
     def _check(self) -> SafetyConfig:
@@ -323,6 +332,18 @@ class XArmConfig(_Section):
     gripper_speed: float = Field(2000.0, gt=0, le=5000, description="SDK gripper speed (r/min)")
     reconnect_min_s: float = Field(0.5, gt=0, description="first reconnect delay; doubles up to the max (s)")
     reconnect_max_s: float = Field(8.0, gt=0, description="longest reconnect delay (s)")
+    controller_limits: Literal["set", "verify"] = Field(
+        "set",
+        description="on every connect and recovery: set the controller's reduced mode, TCP speed, TCP boundary, "
+        "collision sensitivity and self-collision detection from config and read them back (set), or only read "
+        "them (verify); a disagreement is a fault (docs/xarm.md)",
+    )
+    fence_margin_m: float = Field(
+        0.02, ge=0.005, le=0.2,
+        description="the controller's TCP boundary lies this far outside safety.workspace_*_m, so the pipeline "
+        "stops first (m)",
+    )
+    collision_sensitivity: int = Field(3, ge=1, le=5, description="controller collision sensitivity, 1-5 (0 = off is refused)")
 
 
 class ArmConfig(_Section):

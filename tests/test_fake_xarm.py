@@ -460,5 +460,6 @@ def test_signatures_match_the_sdk():
     for name in SDK_METHODS:
         assert _named_params(getattr(FakeXArmAPI, name)) == _named_params(getattr(wrapper.XArmAPI, name)), name
     assert _named_params(FakeXArmAPI.__init__)[:3] == _named_params(wrapper.XArmAPI.__init__)[:3]
-    for prop in ("connected", "mode", "state", "error_code", "warn_code", "version_number"):
+    for prop in ("connected", "mode", "state", "error_code", "warn_code", "version_number", "collision_sensitivity",
+                 "self_collision_params"):
         assert isinstance(getattr(wrapper.XArmAPI, prop), property), prop

@@ -212,19 +212,25 @@ def _absinfo(lo: int, hi: int) -> AbsInfo:
     return AbsInfo(value=(lo + hi) // 2, min=lo, max=hi, fuzz=0, flat=0, resolution=0)
 
 
+#: The default config's six buttons (the kernel lists every key a device has in its capabilities).
+ALL_BUTTONS = tuple(ecodes.ecodes[getattr(JoystickConfig(), f"button_{b.value}")] for b in Button)
+
+
 class FakeDevice:
     """What EvdevJoystick uses of ``evdev.InputDevice``; ``events`` are yielded, then ENODEV (unplugged),
     or, with ``events=None``, the read loop waits until cancelled (a device that stays)."""
 
-    def __init__(self, path: str, name: str, abs_caps: dict[int, AbsInfo], events: list[InputEvent] | None):
+    def __init__(self, path: str, name: str, abs_caps: dict[int, AbsInfo], events: list[InputEvent] | None,
+                 keys: tuple[int, ...] = ALL_BUTTONS):
         self.path, self.name = path, name
         self._abs = abs_caps
         self._events = events
+        self.keys = keys
         self.closed = self.grabbed = False
         self.unplug = lambda: None
 
     def capabilities(self, verbose: bool = False, absinfo: bool = True):
-        caps = {ecodes.EV_KEY: [ecodes.BTN_TRIGGER, ecodes.BTN_THUMB]}
+        caps = {ecodes.EV_KEY: list(self.keys)}
         if self._abs:
             caps[ecodes.EV_ABS] = list(self._abs.items())
         return caps
@@ -262,7 +268,7 @@ class FakeBus:
         if path not in self.plugged:
             raise FileNotFoundError(errno.ENOENT, "No such file or directory", path)
         d = self.plugged[path]
-        dev = FakeDevice(d.path, d.name, d._abs, d._events)
+        dev = FakeDevice(d.path, d.name, d._abs, d._events, d.keys)
         dev.unplug = lambda: self.plugged.pop(path, None)
         self.opened.append(dev)
         return dev
@@ -351,6 +357,27 @@ async def test_evdev_joystick_opens_only_the_configured_device(bus):
         await _until(lambda: any(up for up, _ in links))
         assert joy.device_name == "Right Stick"
         assert all(d.closed for d in bus.opened if d.name == "Left Stick")
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+
+async def test_a_joystick_without_the_stop_button_is_not_used_and_says_why(bus):
+    """The person's stop button is part of the joystick: a device lacking it is passed over, reported."""
+    links: list[tuple[bool, str]] = []
+    joy = EvdevJoystick(JoystickConfig(poll_s=0.02), lambda a: None, lambda b: None,
+                        lambda up, text: links.append((up, text)))
+    no_stop = tuple(k for k in ALL_BUTTONS if k != ecodes.BTN_PINKIE)
+    bus.plugged["/dev/input/event4"] = FakeDevice("/dev/input/event4", "Two Button Stick", JOY_CAPS, None, no_stop)
+    task = asyncio.create_task(joy.run())
+    try:
+        await _until(lambda: links)
+        why = "joystick Two Button Stick at /dev/input/event4 has no BTN_PINKIE (joystick.button_stop): not used"
+        assert links[0] == (False, why)
+        assert not joy.connected and all(d.closed for d in bus.opened)
+        bus.plugged["/dev/input/event5"] = FakeDevice("/dev/input/event5", "Full Stick", JOY_CAPS, None)
+        await _until(lambda: joy.connected)
+        assert joy.device_name == "Full Stick"
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)

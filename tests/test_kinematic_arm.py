@@ -153,13 +153,18 @@ def test_limit_twist_properties(raw, lin, ang):
 
 
 def test_arm_applies_its_limits_to_commands():
-    arm = KinematicArm(START, LimitsConfig(linear_mps=0.25, angular_radps=0.5))
+    arm = KinematicArm(START, LimitsConfig(linear_mps=0.25, angular_radps=0.5, tcp_mps=1.0))
     arm.command_twist([1.0, 0.5, 0.0, 0.0, 0.0, 2.0])
     arm.step(1.0)
     p = arm.read().pose
     np.testing.assert_allclose(p.position, START.position + [0.25, 0.125, 0.0], atol=1e-12)
     expected = _axis_angle_matrix([0, 0, 1], 0.5) @ START.rotation
     np.testing.assert_allclose(p.rotation, expected, atol=1e-9)
+    arm = KinematicArm(START, LimitsConfig(linear_mps=0.25, angular_radps=0.5, tcp_mps=0.1))
+    arm.command_twist([1.0, 0.5, 0.0, 0.0, 0.0, 0.0])
+    arm.step(1.0)  # per axis (0.25, 0.125), then the TCP speed 0.1 m/s, direction kept
+    np.testing.assert_allclose(arm.read().pose.position, START.position + 0.1 * np.array([2, 1, 0]) / math.sqrt(5),
+                               atol=1e-12)
 
 
 def test_default_limits_are_the_configs():

@@ -102,8 +102,20 @@ def test_arm_fault_zeroes():
 def test_speed_limit_keeps_direction():
     r = ramp(pipe(), [1.0, 0.5, 0, 0, 0, 0])
     assert SafetyCode.SPEED in r.codes
-    assert r.twist[0] == pytest.approx(LIM.linear_mps)
+    # per axis to (0.25, 0.125), whose norm 0.28 m/s is then scaled to the TCP limit
+    assert np.linalg.norm(r.twist[:3]) == pytest.approx(LIM.tcp_mps)
     assert r.twist[1] / r.twist[0] == pytest.approx(0.5)
+    wide = LimitsConfig(tcp_mps=1.0)
+    r = ramp(SafetyPipeline(CFG, wide, DT), [1.0, 0.5, 0, 0, 0, 0])
+    assert r.twist[0] == pytest.approx(wide.linear_mps) and r.twist[1] == pytest.approx(0.5 * wide.linear_mps)
+
+
+def test_tcp_speed_limit_bounds_a_diagonal_within_the_per_axis_limits():
+    """0.2 m/s on each axis passes the per-axis limit (0.25) but is 0.35 m/s at the TCP: scaled to 0.25."""
+    r = ramp(pipe(), [0.2, -0.2, 0.2, 0, 0, 0])
+    assert SafetyCode.SPEED in r.codes
+    assert np.linalg.norm(r.twist[:3]) == pytest.approx(LIM.tcp_mps)
+    np.testing.assert_allclose(r.twist[:3] / np.linalg.norm(r.twist[:3]), np.array([1, -1, 1]) / math.sqrt(3))
 
 
 def test_acceleration_limited_from_rest():

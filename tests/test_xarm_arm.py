@@ -78,7 +78,12 @@ def test_startup_call_order(arm, fake):
     names = [c.name for c in fake.calls]
     expected = [
         "connect", "get_err_warn_code",  # an error already present would stay latched
-        "clean_warn", "motion_enable", "set_mode", "set_state",
+        "clean_warn",
+        # the controller's own limits, before motion is enabled; reduced mode last (it makes the speed and
+        # boundary set before it take effect), then everything read back
+        "set_reduced_max_tcp_speed", "set_reduced_tcp_boundary", "set_fence_mode", "set_collision_sensitivity",
+        "set_self_collision_detection", "set_reduced_mode", "get_reduced_states",
+        "motion_enable", "set_mode", "set_state",
         "get_err_warn_code", "get_state",  # verified: no error, state ready
         "set_gripper_mode", "set_gripper_enable", "set_gripper_speed",
         "get_position", "get_servo_angle",

@@ -8,6 +8,7 @@ units happens inside a driver only.
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -52,13 +53,17 @@ class Kinematics(Protocol):
         """Joint velocities (rad/s) realising ``twist`` at ``q`` (damped least squares)."""
 
 
-def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float) -> FloatArray:
-    """Scale the linear and the angular part so no axis exceeds its limit, keeping each direction."""
+def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float, tcp_mps: float = math.inf) -> FloatArray:
+    """Scale the linear and the angular part so no axis exceeds its limit (m/s, rad/s) and the linear
+    part's norm does not exceed ``tcp_mps`` (m/s), keeping each direction."""
     t = np.array(twist, dtype=float)
     for part, limit in ((slice(0, 3), linear_mps), (slice(3, 6), angular_radps)):
         peak = float(np.max(np.abs(t[part])))
         if peak > limit:
             t[part] *= limit / peak
+    speed = float(np.linalg.norm(t[:3]))
+    if speed > tcp_mps:
+        t[:3] *= tcp_mps / speed
     return t
 
 

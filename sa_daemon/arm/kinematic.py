@@ -45,7 +45,7 @@ class KinematicArm(Arm):
         t = np.asarray(twist, dtype=float)
         if t.shape != (6,) or not np.all(np.isfinite(t)):
             raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps)
+        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps)
 
     def command_gripper(self, closed: bool) -> None:
         """Open or close the gripper (instantly). Motion is not gated here: like the xArm, the arm moves

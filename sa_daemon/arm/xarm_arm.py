@@ -34,6 +34,7 @@ from ..config import Config, ConfigError
 from ..extras import MissingExtra, require
 from ..geometry import FloatArray, Pose
 from .base import Arm, ArmState, Kinematics, limit_twist
+from .xarm_limits import apply_limits, compare, expected_limits, read_limits
 
 if TYPE_CHECKING:
     from ..world.scene import Scene
@@ -96,6 +97,19 @@ def error_text(code: int) -> str:
     return f"xArm error {code}: {CONTROLLER_ERRORS.get(code, 'controller error (see the SDK error list)')}"
 
 
+def firmware_of(api: Any) -> tuple[str | None, str | None]:
+    """``(version, problem)`` of the controller's firmware (``version_number``): the version as text
+    (``None``: unreadable) and why it cannot be used (``None``: it can, or the version is unknown)."""
+    try:
+        v = tuple(int(x) for x in api.version_number)[:3]
+    except (AttributeError, TypeError, ValueError):
+        return None, None
+    version = ".".join(str(x) for x in v)
+    if not any(v) or v >= MIN_FIRMWARE:
+        return version, None  # (0, 0, 0): unknown
+    return version, f"xArm firmware {version} < 1.8.0: velocity commands would not time out"
+
+
 def twist_to_speeds(twist: FloatArray) -> list[float]:
     """SDK ``speeds`` of a base-frame twist: ``[mm/s x3, rad/s x3]`` (m/s -> mm/s; rad/s kept)."""
     t = np.asarray(twist, dtype=float)
@@ -127,7 +141,7 @@ class _Work:
         return bool(self.link_lost or self.zero or self.reset or self.gripper is not None or self.twist or self.poll)
 
 
-def _default_api_factory(ip: str, sdk: str = "real") -> Callable[[], Any]:
+def sdk_factory(ip: str, sdk: str = "real") -> Callable[[], Any]:
     """``XArmAPI(ip, is_radian=True, do_not_open=True)``, imported lazily; with ``sdk = "fake"`` (config
     ``arm.xarm.sdk``) the documented fake, ``sa_daemon/testing/fake_xarm.py``."""
     if sdk == "fake":
@@ -173,6 +187,8 @@ class XArm(Arm):
         xc = cfg.arm.xarm
         self._xc = xc
         self._limits = cfg.limits
+        #: The controller limits config asks for (``xarm_limits.py``), set or verified at every enabling.
+        self.controller_limits = expected_limits(cfg)
         #: Command and poll rate (Hz): the control rate, capped at the SDK's 250 Hz.
         self.rate_hz = min(float(cfg.runtime.control_hz), MAX_COMMAND_HZ)
         #: ``duration`` of each velocity command (s): the arm stops this long after the last command.
@@ -213,9 +229,10 @@ class XArm(Arm):
             "gripper_code": 0,
             "firmware": None,
             "note": None,
+            "controller_limits": None,
         }
 
-        self._api = (api_factory or _default_api_factory(xc.ip, xc.sdk))()
+        self._api = (api_factory or sdk_factory(xc.ip, xc.sdk))()
         self._api.register_error_warn_changed_callback(self._on_error_warn)
         self._api.register_connect_changed_callback(self._on_connect_changed)
 
@@ -255,7 +272,7 @@ class XArm(Arm):
         t = np.asarray(twist, dtype=float)
         if t.shape != (6,) or not np.all(np.isfinite(t)):
             raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        speeds = twist_to_speeds(limit_twist(t, self._limits.linear_mps, self._limits.angular_radps))
+        speeds = twist_to_speeds(limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps))
         with self._cv:
             if self._fault is not None or self._closing:
                 self._stats["twists_dropped"] += 1
@@ -537,24 +554,25 @@ class XArm(Arm):
                 self._latch(firmware)
 
     def _firmware_problem(self) -> str | None:
-        version = getattr(self._api, "version_number", None)
-        try:
-            v = tuple(int(x) for x in version)[:3]  # type: ignore[union-attr]
-        except (TypeError, ValueError):
-            return None
+        version, problem = firmware_of(self._api)
         with self._cv:
-            self._stats["firmware"] = ".".join(str(x) for x in v)
-        if not any(v) or v >= MIN_FIRMWARE:
-            return None  # (0, 0, 0): unknown
-        return f"xArm firmware {'.'.join(map(str, v))} < 1.8.0: velocity commands would not time out"
+            self._stats["firmware"] = version
+        return problem
 
     def _enable(self, recovering: bool) -> str | None:
-        """The enabling sequence (recovery first clears the error); the reason it failed or ``None``."""
-        steps: list[tuple[str, tuple]] = [("clean_error", ())] if recovering else []
-        steps += [("clean_warn", ()), ("motion_enable", (True,)), ("set_mode", (MODE_CARTESIAN_VELOCITY,)),
-                  ("set_state", (0,))]
+        """The enabling sequence (recovery first clears the error), with the controller's limits set or
+        verified before motion is enabled; the reason it failed or ``None``."""
         what = "recovery" if recovering else "setup"
+        steps: list[tuple[str, tuple]] = [("clean_error", ())] if recovering else []
+        steps += [("clean_warn", ())]
         for name, args in steps:
+            code = self._call(name, *args)
+            if code != 0:
+                return f"xArm {what} failed: {name}{args!r} returned code {code}"
+        failure = self._check_controller_limits()
+        if failure is not None:
+            return failure
+        for name, args in (("motion_enable", (True,)), ("set_mode", (MODE_CARTESIAN_VELOCITY,)), ("set_state", (0,))):
             code = self._call(name, *args)
             if code != 0:
                 return f"xArm {what} failed: {name}{args!r} returned code {code}"
@@ -569,6 +587,31 @@ class XArm(Arm):
             return f"xArm {what} failed: not ready after set_state(0) (state {state}, code {code})"
         self._setup_gripper()
         return None
+
+    def _check_controller_limits(self) -> str | None:
+        """Set (``arm.xarm.controller_limits = "set"``) the controller's limits, read them back and
+        compare with config; the fault text naming each disagreement, or ``None``. ``status()`` shows
+        every setting with its value on the controller and the expected one."""
+        want = self.controller_limits
+        failed = apply_limits(self._call, want) if self._xc.controller_limits == "set" else []
+        actual = read_limits(self._call, self._property)
+        mismatches = compare(want, actual)
+        bad = {m.name for m in mismatches}
+        with self._cv:
+            self._stats["controller_limits"] = {
+                name: {"controller": actual[name], "expected": expected, "ok": name not in bad}
+                for name, expected in want.items()
+            }
+        if not failed and not mismatches:
+            return None
+        return "xArm controller limits: " + "; ".join(failed + [str(m) for m in mismatches])
+
+    def _property(self, name: str) -> Any:
+        """An SDK property (the report thread's copy: no call to the controller); ``None`` if unreadable."""
+        try:
+            return getattr(self._api, name)
+        except Exception:  # noqa: BLE001 - a property the SDK version lacks, or its report not yet in
+            return None
 
     def _setup_gripper(self) -> None:
         """Location mode, enable, speed. A missing or faulty gripper is reported, not an arm fault."""

@@ -61,8 +61,24 @@ def build_daemon(args: argparse.Namespace) -> Any:
     return build(run_config(args), launch_of(args))
 
 
+def cmd_check(args: argparse.Namespace) -> int:
+    """``run --arm xarm --check``: verify the real arm's controller without moving it (``arm/xarm_check.py``)."""
+    from ..arm.xarm_check import format_check, run_check
+    from ..config import ConfigError
+
+    cfg = run_config(args)
+    if cfg.arm.backend != "xarm":
+        raise ConfigError(f"arm.backend: run --check checks the real arm's controller; use --arm xarm, not {cfg.arm.backend!r}")
+    items = run_check(cfg)
+    print(format_check(items))
+    return 0 if all(i.ok for i in items) else 1
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from ..runtime.rate import new_event_loop
+
+    if args.check:
+        return cmd_check(args)
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     daemon = build_daemon(args)
@@ -196,6 +212,8 @@ def add_parsers(sub: Any) -> None:
     add_run_options(r)
     r.add_argument("--duration", type=float, help="stop cleanly after this many seconds (default: with "
                    "the sim user, when its tasks are done; with a joystick, never)")
+    r.add_argument("--check", action="store_true", help="with --arm xarm: connect, set or verify the controller's "
+                   "limits, print a pass/fail list and exit, without moving the arm (docs/xarm.md)")
     r.set_defaults(func=cmd_run)
 
     m = sub.add_parser("monitor", help="live view of a running daemon (over ZeroMQ)")

@@ -180,6 +180,11 @@ class Controller:
         return self._safety.stopped
 
     @property
+    def stop_tested(self) -> bool:
+        """The start-up stop self-test has passed, or none is required (``safety.stop_self_test``)."""
+        return self._safety.stop_tested
+
+    @property
     def last(self) -> Tick:
         """The last :meth:`tick`'s output."""
         return self._last
@@ -299,10 +304,10 @@ class Controller:
     # -- plans -------------------------------------------------------------------------------------------
 
     def snapshot(self, pose: Pose, budget_s: float | None, node_budget: int | None = None) -> Snapshot | None:
-        """What the planner needs now, or ``None`` when no plan is wanted (a question is pending or the
-        gripper is closed). A rule-based method's snapshot is planned by the solver without search; the
-        daemon spares the worker that round trip with :meth:`adopt_fixed`."""
-        if self._question is not None or self._gripper_closed:
+        """What the planner needs now, or ``None`` when no plan is wanted (a question is pending, the
+        gripper is closed, or the stop self-test is pending). A rule-based method's snapshot is planned by
+        the solver without search; the daemon spares the worker that round trip with :meth:`adopt_fixed`."""
+        if self._question is not None or self._gripper_closed or not self._safety.stop_tested:
             return None
         b = self._belief
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
@@ -316,7 +321,8 @@ class Controller:
         period; one more of grace). A plan is moot, and ignored, when a question arrived meanwhile, the
         method changed, the gripper was closed, or its snapshot was taken before the last :meth:`reset`."""
         stale_task = self._issued.get(snap, self._task) != self._task
-        if self._question is not None or snap.method != self._method or self._gripper_closed or stale_task:
+        if (self._question is not None or snap.method != self._method or self._gripper_closed or stale_task
+                or not self._safety.stop_tested):
             return None
         action = result.action
         if action.kind is ActionKind.QUESTION:
@@ -339,7 +345,7 @@ class Controller:
         (a late or dead planner) gives no-assist."""
         if self._question is not None:
             return Action(ActionKind.QUESTION, None, self._question.target)
-        if not self._assist or t > self._plan.until:
+        if not self._assist or t > self._plan.until or not self._safety.stop_tested:
             return NO_ASSIST
         return self._plan.action
 
@@ -363,7 +369,7 @@ class Controller:
         self._t_speed = -math.inf
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
-        self._safety.resume()
+        self._safety.restart()
 
     # -- stop --------------------------------------------------------------------------------------------
 
@@ -371,9 +377,16 @@ class Controller:
         """Latch the stop: every tick commands zero until :meth:`resume`."""
         self._safety.stop()
 
-    def resume(self) -> None:
-        """Release the stop; the arm restarts from rest (acceleration-limited)."""
+    def resume(self) -> bool:
+        """Release the stop; the arm restarts from rest (acceleration-limited). Returns ``True`` when this
+        resume passed the stop self-test (a stop was latched and the test was pending)."""
+        pending = not self._safety.stop_tested
         self._safety.resume()
+        return pending and self._safety.stop_tested
+
+    def require_stop_test(self) -> None:
+        """No assistance, no plans and no motion until a stop has been latched and resumed once."""
+        self._safety.require_stop_test()
 
     # -- control -----------------------------------------------------------------------------------------
 

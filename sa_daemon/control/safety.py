@@ -2,7 +2,9 @@
 
 Stages, in order; each that changes the command adds its :class:`SafetyCode` to the result:
 
-1. ``stopped``       - a latched stop (``stop`` command, e-stop button) holds the arm until ``resume``.
+1. ``stopped``       - a latched stop (``stop`` command, e-stop button) holds the arm until ``resume``;
+   ``stop_untested`` - with the start-up self-test required (``safety.stop_self_test``), the arm is held
+   until a stop has been latched and resumed once, so the stop is known to work before anything moves.
 2. ``arm_fault``     - the driver reports a fault: zero until it is cleared on ``resume``.
 3. ``nan_refused``   - a twist with NaN/inf (or of the wrong shape) becomes zero.
 4. ``stale_input``   - no fresh user input for ``safety.stale_command_s``: zero.
@@ -32,7 +34,9 @@ Stages, in order; each that changes the command adds its :class:`SafetyCode` to 
    command (and a joint speed above its limit scales the command).
 
 Stages 1-5 zero the command at once (a stop is never softened by the acceleration limit) and
-restart the next command from rest; stages 8-10 only reduce speeds. So every output is finite,
+restart the next command from rest; stages 8-10 only reduce speeds (after stage 9 has removed the
+part toward a singularity, the whole twist is scaled down again where that lengthened its linear part
+beyond the speed limits or the workspace step). So every output is finite,
 within the speed limits, never leaves the box, and changes by at most the acceleration limit from
 the last output unless a zeroing or position stage says why it did not. Stages 9-10 apply to arms
 with joints (``Arm.kinematics``); the kinematic arm has none.
@@ -66,6 +70,7 @@ class SafetyCode(str, Enum):
     NAN = "nan_refused"
     ARM_FAULT = "arm_fault"
     STOPPED = "stopped"
+    STOP_UNTESTED = "stop_untested"
 
 
 _SEVERITY = {c: i for i, c in enumerate(SafetyCode)}
@@ -114,6 +119,7 @@ class SafetyPipeline:
         self.kinematics = kinematics
         self._last = ZERO.copy()
         self._stopped = False
+        self._stop_tested = True
         self._lo = np.asarray(cfg.workspace_min_m, dtype=float)
         self._hi = np.asarray(cfg.workspace_max_m, dtype=float)
         self._amax = np.array([cfg.linear_accel_mps2] * 3 + [cfg.angular_accel_radps2] * 3)
@@ -124,12 +130,28 @@ class SafetyPipeline:
     def stopped(self) -> bool:
         return self._stopped
 
+    @property
+    def stop_tested(self) -> bool:
+        """A stop has been latched and resumed since :meth:`require_stop_test` (or none is required)."""
+        return self._stop_tested
+
+    def require_stop_test(self) -> None:
+        """Hold the arm (``stop_untested``) until a stop has been latched and then released by :meth:`resume`."""
+        self._stop_tested = False
+
     def stop(self) -> None:
         """Latch a stop: every command is zero until :meth:`resume`."""
         self._stopped = True
 
     def resume(self) -> None:
-        """Release the latch; the arm restarts from rest (acceleration-limited)."""
+        """Release the latch (the person's or carer's resume; releasing a latched stop passes the stop's
+        self-test); the arm restarts from rest (acceleration-limited)."""
+        if self._stopped:
+            self._stop_tested = True
+        self.restart()
+
+    def restart(self) -> None:
+        """Release the latch for a new task (no proof of anything); the arm restarts from rest."""
         self._stopped = False
         self._last = ZERO.copy()
 
@@ -152,6 +174,8 @@ class SafetyPipeline:
         ``gripper_closed``: the gripper is closed or closing (stage 5)."""
         if self._stopped:
             return self._zero(SafetyCode.STOPPED)
+        if not self._stop_tested:
+            return self._zero(SafetyCode.STOP_UNTESTED)
         if fault:
             return self._zero(SafetyCode.ARM_FAULT)
         t = np.asarray(twist, dtype=float) if np.ndim(twist) == 1 else np.full(1, np.nan)
@@ -162,13 +186,14 @@ class SafetyPipeline:
         if gripper_closed:
             return self._zero(SafetyCode.GRIPPER)
         codes: list[SafetyCode] = []
-        out = limit_twist(t, self.limits.linear_mps, self.limits.angular_radps)
+        out = limit_twist(t, self.limits.linear_mps, self.limits.angular_radps, self.limits.tcp_mps)
         if not np.allclose(out, t, rtol=0, atol=1e-12):
             codes.append(SafetyCode.SPEED)
         out = self._accel(out, codes)
         out = self._workspace(out, pose, codes)
         if self.kinematics is not None and joints is not None:
             out = self._joint_stages(out, np.asarray(joints, dtype=float), codes)
+            out = self._rescale(out, pose, codes)
         self._last = out.copy()
         return SafetyResult(out, tuple(codes))
 
@@ -192,6 +217,33 @@ class SafetyPipeline:
             t = t.copy()
             t[:3] = clipped
         return t
+
+    def _rescale(self, t: FloatArray, pose: Pose, codes: list[SafetyCode]) -> FloatArray:
+        """Stage 9 removes the part toward a singularity in the length-normalised twist space, which can
+        lengthen the linear part: the speed limits and the workspace step hold again here, by scaling
+        the *whole* twist (so every joint velocity keeps its direction, and stage 10's verdict stands).
+        Found by the controller-limits property test (``tests/test_controller_limits.py``)."""
+        lim = self.limits
+        scale = 1.0
+        for part, limit in ((t[:3], lim.linear_mps), (t[3:], lim.angular_radps)):
+            peak = float(np.max(np.abs(part)))
+            if peak > limit:
+                scale = min(scale, limit / peak)
+        speed = float(np.linalg.norm(t[:3]))
+        if speed > lim.tcp_mps:
+            scale = min(scale, lim.tcp_mps / speed)
+        code = SafetyCode.SPEED
+        p, v = np.asarray(pose.position, dtype=float), t[:3]
+        room = np.where(v > 0, self._hi - p, self._lo - p) / self.dt  # the speed per axis that reaches a face
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratios = np.where(np.abs(v) > np.abs(room), np.maximum(room / v, 0.0), 1.0)
+        if float(np.min(ratios)) < scale:
+            scale, code = float(np.min(ratios)), SafetyCode.WORKSPACE
+        if scale >= 1.0:
+            return t
+        if code not in codes:
+            codes.append(code)
+        return t * scale
 
     def _normalised_jacobian(self, q: FloatArray) -> FloatArray:
         """The Jacobian at ``q`` with its linear rows divided by ``characteristic_length_m`` (stage 8)."""

@@ -132,10 +132,14 @@ class EvdevJoystick:
         self.device_name: str | None = None
         self.connected = False
 
-    def _find(self) -> Any | None:
+    def _find(self) -> tuple[Any | None, str | None]:
+        """The first device with the configured axes and stop button, or ``None`` and why a device that
+        has the axes was passed over (it lacks the stop button: the person could not stop the arm)."""
         import evdev
 
         want = self.cfg.device
+        stop = _code(self.cfg.button_stop, "BTN_", "joystick.button_stop")
+        why = None
         for path in evdev.list_devices():
             try:
                 dev = evdev.InputDevice(path)
@@ -149,17 +153,22 @@ class EvdevJoystick:
             except ValueError:
                 dev.close()
                 continue
-            return dev
-        return None
+            if stop not in dev.capabilities().get(ecodes.EV_KEY, []):
+                why = f"joystick {dev.name} at {path} has no {self.cfg.button_stop} (joystick.button_stop): not used"
+                dev.close()
+                continue
+            return dev, None
+        return None, why
 
     async def run(self) -> None:
         """Read forever (cancel to stop), re-finding the device whenever it disappears."""
         announced_missing = False
         while True:
-            dev = self._find()
+            dev, why = self._find()
             if dev is None:
                 if not announced_missing:
-                    self.on_link(False, f"no joystick {self.cfg.device or '(any)'} found; looking every {self.cfg.poll_s} s")
+                    self.on_link(False, why or f"no joystick {self.cfg.device or '(any)'} found; looking every "
+                                 f"{self.cfg.poll_s} s")
                     announced_missing = True
                 await asyncio.sleep(self.cfg.poll_s)
                 continue

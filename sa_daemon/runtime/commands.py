@@ -72,9 +72,11 @@ def resume(d: Daemon) -> None:
     """Clear the arm's fault and release the stop; the arm restarts from rest."""
     if d.arm is not None:
         d.arm.reset_fault()
-    d.ctl.resume()
+    passed = d.ctl.resume()
     d.fault_reported = None
     d.event("resume")
+    if passed:
+        d.event("stop_test", passed=True)
 
 
 def set_method(d: Daemon, method: str) -> None:

@@ -143,6 +143,9 @@ class Daemon:
         if not up:
             self.ctl.lose_input()
         self.event("input_back" if up else "input_lost", detail=text)
+        if not up and not self.ctl.stopped:
+            # The person's stop button went with the joystick: latch the stop (resume once it is back).
+            commands.stop(self, "joystick_lost")
 
     def set_gripper(self, closed: bool) -> None:
         if self.arm is None:

@@ -41,6 +41,9 @@ def start_components(d: Daemon) -> None:
     d.reset_arm()
     assert d.arm is not None
     d.ctl.use_arm(d.arm.kinematics)
+    test = cfg.safety.stop_self_test
+    if test == "on" or (test == "auto" and d.arm.realtime):
+        d.ctl.require_stop_test()  # nothing moves until a stop is latched and resumed once
     # One epoch for every loop; the others are phased between control ticks (a quarter and a half
     # period after one) so their work does not delay a control tick.
     t0 = time.monotonic() + 0.05

@@ -84,6 +84,10 @@ class View:
     def stopped(self) -> bool:
         return self._d.ctl.stopped
 
+    @property
+    def stop_tested(self) -> bool:
+        return self._d.ctl.stop_tested
+
     # -- the daemon --------------------------------------------------------------------------------------
 
     @property

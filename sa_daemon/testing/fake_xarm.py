@@ -48,10 +48,26 @@ API-code list = S):
     gripper that is not enabled returns 103 ("end effector not enabled") and a gripper with an injected
     error (``inject_gripper_error``) returns 102 until ``clean_gripper_error()``.
 
+11. Controller limits (S ``doc/api/xarm_api.md``; the table in ``arm/xarm_limits.py``):
+    ``set_reduced_mode``, ``set_reduced_max_tcp_speed`` (mm/s, stored as float32),
+    ``set_reduced_tcp_boundary([x_max, x_min, y_max, y_min, z_max, z_min])`` (mm; truncated to int, a pair
+    given min first is swapped, as the SDK does), ``set_fence_mode`` (returns ``[code]``, a list, as the
+    SDK's does; ``set_fense_mode`` is its old name), ``set_collision_sensitivity(0..5)`` (the SDK asserts
+    the range; it ends with ``set_state(0)``), ``set_self_collision_detection``; read back with
+    ``get_reduced_mode``, ``get_reduced_states`` (7 elements: on, boundary, TCP speed, joint speed, 14
+    joint ranges, fence on, rebound on) and the properties ``collision_sensitivity`` and
+    ``self_collision_params``. The SDK says a new speed or boundary takes effect when reduced mode is
+    switched on again: the fake enforces the values in force at the last ``set_reduced_mode(True)``.
+    Enforcement (the docs say the arm stops with C35 when the TCP crosses the boundary; they do not say
+    whether a velocity above the reduced TCP speed is capped or stopped, so the fake takes the stricter
+    reading): with the fence on, the TCP reaching the boundary stops the arm there with error 35; in
+    reduced mode, a velocity command whose linear speed exceeds the reduced TCP speed stops the arm with
+    error 24 and returns 1. Both fire the error callback like :meth:`inject_error`.
+
 Deliberately stricter than the real controller: a velocity command outside mode 5 returns 9 (the SDK only
-logs a warning and the controller ignores it), and non-finite or malformed speeds return 12. Not modelled:
-speed and workspace limits, joint motion (``get_servo_angle`` returns the fixed start angles), the report
-socket's other callbacks.
+logs a warning and the controller ignores it), non-finite or malformed speeds return 12, and a boundary
+value outside int16 returns 12. Not modelled: joint motion (``get_servo_angle`` returns the fixed start
+angles), joint speed limits, the report socket's other callbacks.
 
 Every call is logged (:attr:`calls`, :meth:`wait_for_calls`) for assertions on order and timing.
 """
@@ -77,6 +93,22 @@ NOT_READY = 9
 PARAM_ERROR = 12
 END_EFFECTOR_HAS_FAULT = 102
 END_EFFECTOR_NOT_ENABLED = 103
+#: Speeds travel as 32-bit floats (S): a command this close above the reduced TCP speed is at it (mm/s).
+SPEED_RESOLUTION_MM_S = 1e-3
+#: Controller errors the fake raises by itself (rule 11).
+SPEED_LIMIT_ERROR = 24
+BOUNDARY_ERROR = 35
+
+#: What a controller nobody has configured reports (rule 11): reduced mode and the fence off, a wide
+#: boundary, sensitivity at the factory default 3, self-collision detection off.
+FACTORY_LIMITS = {
+    "reduced_mode": False,
+    "tcp_speed_mm_s": 250.0,
+    "boundary_mm": (1000, -1000, 1000, -1000, 1000, -1000),
+    "fence": False,
+    "collision_sensitivity": 3,
+    "self_collision": False,
+}
 
 GRIPPER_CLOSED = 0
 GRIPPER_OPEN = 850
@@ -99,7 +131,9 @@ SDK_METHODS = (
     "set_gripper_enable", "set_gripper_speed", "set_gripper_position", "get_gripper_position",
     "get_gripper_err_code", "clean_gripper_error", "register_connect_changed_callback",
     "register_error_warn_changed_callback", "release_connect_changed_callback",
-    "release_error_warn_changed_callback",
+    "release_error_warn_changed_callback", "set_reduced_mode", "set_reduced_max_tcp_speed",
+    "set_reduced_tcp_boundary", "set_fence_mode", "set_collision_sensitivity",
+    "set_self_collision_detection", "get_reduced_mode", "get_reduced_states",
 )
 
 
@@ -157,6 +191,7 @@ class FakeXArmAPI:
         firmware: tuple[int, int, int] = (2, 4, 0),
         start_mm_rad: Sequence[float] = DEFAULT_START_MM_RAD,
         start_joints_rad: Sequence[float] = DEFAULT_START_JOINTS_RAD,
+        limits: dict[str, Any] | None = None,
         **kwargs: Any,
     ) -> None:
         self._lock = threading.RLock()
@@ -195,6 +230,16 @@ class FakeXArmAPI:
         self._gripper_speed = 0.0
         self._gripper_pos = float(GRIPPER_OPEN)
         self._gripper_error = 0
+        # controller limits (rule 11): as set, and as in force since the last set_reduced_mode(True)
+        lim = {**FACTORY_LIMITS, **(limits or {})}
+        self._reduced = bool(lim["reduced_mode"])
+        self._tcp_speed = float(np.float32(lim["tcp_speed_mm_s"]))
+        self._boundary = tuple(int(v) for v in lim["boundary_mm"])
+        self._fence = bool(lim["fence"])
+        self._sensitivity = int(lim["collision_sensitivity"])
+        self._self_collision = bool(lim["self_collision"])
+        self._active_speed, self._active_boundary = self._tcp_speed, self._boundary
+        self._pending: list[dict] = []  # error callbacks raised under the lock, fired after it
         if not do_not_open:
             if not port:
                 raise ValueError("port (controller address) is required unless do_not_open=True")
@@ -208,13 +253,8 @@ class FakeXArmAPI:
             raise ValueError("controller error codes are positive")
         with self._lock:
             self._advance()
-            self._error = int(code)
-            self._mode, self._ready, self._enabled = 0, False, False
-            self._stop()
-            payload = self._err_payload()
-            connected = self._connected
-        if connected:
-            self._fire(self._error_cbs, payload)
+            self._raise(int(code))
+        self._flush()
 
     def inject_warn(self, code: int) -> None:
         """A controller warning ``code`` (motion continues); fires the error/warn callback."""
@@ -223,6 +263,14 @@ class FakeXArmAPI:
             payload, connected = self._err_payload(), self._connected
         if connected:
             self._fire(self._error_cbs, payload)
+
+    def place(self, position_mm: Sequence[float], rpy_rad: Sequence[float]) -> None:
+        """Put the TCP at a pose (mm, extrinsic roll-pitch-yaw in rad) at rest, as if moved there by hand."""
+        with self._lock:
+            self._advance()
+            self._stop()
+            self._pos_mm = np.asarray(position_mm, dtype=float).copy()
+            self._quat = rpy_to_quat(rpy_rad)
 
     def inject_gripper_error(self, code: int) -> None:
         """A gripper error: position commands return 102 until ``clean_gripper_error()``."""
@@ -302,14 +350,27 @@ class FakeXArmAPI:
         or when the arm stopped itself; ``None`` while it moves."""
         with self._lock:
             self._advance()
-            return self._stopped_since
+            since = self._stopped_since
+        self._flush()
+        return since
 
     @property
     def speed(self) -> FloatArray:
         """The velocity in force now: ``[mm/s x3, rad/s x3]``, base frame (zero once expired)."""
         with self._lock:
             self._advance()
-            return self._speed.copy()
+            speed = self._speed.copy()
+        self._flush()
+        return speed
+
+    @property
+    def position_mm(self) -> FloatArray:
+        """The TCP position now (mm, base frame)."""
+        with self._lock:
+            self._advance()
+            p = self._pos_mm.copy()
+        self._flush()
+        return p
 
     gripper_position = _locked("_gripper_pos")  # mm
     gripper_enabled = _locked("_gripper_enabled")
@@ -329,9 +390,27 @@ class FakeXArmAPI:
     def state(self) -> int:
         with self._lock:
             self._advance()
-            return self._state_code()
+            code = self._state_code()
+        self._flush()
+        return code
 
-    error_code = _locked("_error")
+    collision_sensitivity = _locked("_sensitivity")
+
+    @property
+    def self_collision_params(self) -> list:
+        """``[is_collision_detection, tool_type, tool_params]`` (S; the fake has no tool model)."""
+        with self._lock:
+            return [int(self._self_collision), 0, []]
+
+    @property
+    def error_code(self) -> int:
+        """The controller's error now (the motion is advanced first: reaching the fence raises 35)."""
+        with self._lock:
+            self._advance()
+            code = self._error
+        self._flush()
+        return code
+
     warn_code = _locked("_warn")
 
     @property
@@ -482,6 +561,9 @@ class FakeXArmAPI:
                 return HAS_ERROR
             if not (self._ready and self._enabled and not self._paused and self._mode == 5):
                 return NOT_READY
+            if self._reduced and float(np.linalg.norm(s[:3])) > self._active_speed + SPEED_RESOLUTION_MM_S:
+                self._raise(SPEED_LIMIT_ERROR)  # rule 11: the stricter reading
+                return HAS_ERROR
             radian = self._is_radian if is_radian is None else bool(is_radian)
             if not radian:
                 s[3:] = np.radians(s[3:])
@@ -583,9 +665,88 @@ class FakeXArmAPI:
 
         return self._set("clean_gripper_error", (), {}, op)
 
+    # -- controller limits (rule 11) ------------------------------------------------------------------
+
+    def set_reduced_mode(self, on: bool) -> int:
+        def op() -> int:
+            self._reduced = bool(on)
+            if self._reduced:  # the speed and boundary set since take effect now
+                self._active_speed, self._active_boundary = self._tcp_speed, self._boundary
+            return 0
+
+        return self._set("set_reduced_mode", (on,), {}, op)
+
+    def set_reduced_max_tcp_speed(self, speed: float) -> int:
+        def op() -> int:
+            if not (isinstance(speed, (int, float)) and math.isfinite(speed) and speed > 0):
+                return PARAM_ERROR
+            self._tcp_speed = float(np.float32(speed))
+            return 0
+
+        return self._set("set_reduced_max_tcp_speed", (speed,), {}, op)
+
+    def set_reduced_tcp_boundary(self, boundary: Sequence[float]) -> int:
+        if len(boundary) < 6:
+            raise AssertionError("boundary needs 6 values")  # the SDK asserts len >= 6
+
+        def op() -> int:
+            try:
+                b = [int(v) for v in boundary[:6]]
+            except (TypeError, ValueError, OverflowError):
+                return PARAM_ERROR
+            if any(not -32768 <= v <= 32767 for v in b):
+                return PARAM_ERROR
+            for i in (0, 2, 4):  # max first, as the SDK reorders
+                if b[i] < b[i + 1]:
+                    b[i], b[i + 1] = b[i + 1], b[i]
+            self._boundary = tuple(b)
+            return 0
+
+        return self._set("set_reduced_tcp_boundary", (list(boundary),), {}, op)
+
+    def set_fence_mode(self, on: bool) -> list[int] | int:
+        """``[0]`` on success (the SDK returns the reply list); a failure's code as an int."""
+
+        def op() -> list[int]:
+            self._fence = bool(on)
+            return [0]
+
+        return self._set("set_fence_mode", (on,), {}, op)
+
+    set_fense_mode = set_fence_mode  # the SDK's old spelling
+
+    def set_collision_sensitivity(self, value: int, wait: bool = True) -> int:
+        assert isinstance(value, int) and 0 <= value <= 5  # as the SDK checks
+
+        def op() -> int:
+            self._sensitivity = value
+            if not self._error and self._enabled:  # the SDK ends with set_state(0)
+                self._ready, self._paused = True, False
+            return 0
+
+        return self._set("set_collision_sensitivity", (value,), {}, op)
+
+    def set_self_collision_detection(self, on_off: bool) -> int:
+        def op() -> int:
+            self._self_collision = bool(on_off)
+            return 0
+
+        return self._set("set_self_collision_detection", (on_off,), {}, op)
+
+    def get_reduced_mode(self) -> tuple[int, int | None]:
+        return self._get("get_reduced_mode", (), {}, lambda: int(self._reduced))
+
+    def get_reduced_states(self, is_radian: bool | None = None) -> tuple[int, list | None]:
+        def op() -> list:
+            joint_speed = math.pi if (self._is_radian if is_radian is None else is_radian) else 180.0
+            return [int(self._reduced), list(self._boundary), self._tcp_speed, joint_speed, [0.0] * 14,
+                    int(self._fence), 0]
+
+        return self._get("get_reduced_states", (), {"is_radian": is_radian}, op)
+
     # -- internals ------------------------------------------------------------------------------------
 
-    def _set(self, name: str, args: tuple, kwargs: dict, op: Callable[[], int]) -> int:
+    def _set(self, name: str, args: tuple, kwargs: dict, op: Callable[[], Any]) -> Any:
         """Run a setter: hang and connection rules first, then ``op`` under the lock; log the result."""
         return self._run(name, args, kwargs, op, getter=False)
 
@@ -615,22 +776,65 @@ class FakeXArmAPI:
                 value = op()
                 result = (0, value) if getter else value
             self._log(name, args, kwargs, result)
-            return result
+        self._flush()
+        return result
 
     def _log(self, name: str, args: tuple, kwargs: dict, result: Any) -> None:
         self._calls.append(Call(self._clock(), name, args, dict(kwargs), result))
         self._log_cv.notify_all()
 
     def _advance(self) -> None:
-        """Integrate the commanded twist from the last update to now, stopping at its expiry."""
+        """Integrate the commanded twist from the last update to now, stopping at its expiry, or where the
+        TCP reaches the boundary with the fence on (error 35, rule 11)."""
         now = self._clock()
         end = min(now, self._expiry)
         dt = end - self._t
         if dt > 0 and np.any(self._speed):
-            self._pos_mm, self._quat = integrate_pose(self._pos_mm, self._quat, self._speed, dt)
+            hit = self._boundary_time(dt) if self._fence else math.inf
+            self._pos_mm, self._quat = integrate_pose(self._pos_mm, self._quat, self._speed, min(dt, hit))
+            if hit <= dt:
+                self._t = now
+                self._raise(BOUNDARY_ERROR, at=self._t - dt + hit)
+                return
         self._t = now
         if now >= self._expiry:
             self._stop(at=self._expiry)
+        if self._fence and not self._error and self._outside():
+            self._raise(BOUNDARY_ERROR)
+
+    def _box(self) -> tuple[FloatArray, FloatArray]:
+        b = self._active_boundary
+        return np.array([b[1], b[3], b[5]], dtype=float), np.array([b[0], b[2], b[4]], dtype=float)
+
+    def _outside(self) -> bool:
+        lo, hi = self._box()
+        return bool(np.any(self._pos_mm < lo) or np.any(self._pos_mm > hi))
+
+    def _boundary_time(self, dt: float) -> float:
+        """When (s from the last update) the TCP, moving at the linear speed in force, reaches the boundary
+        (``inf``: not within ``dt``). The position moves linearly in the base frame."""
+        lo, hi = self._box()
+        v, p = self._speed[:3], self._pos_mm
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(v > 0, (hi - p) / v, np.where(v < 0, (lo - p) / v, np.inf))
+        first = float(np.min(np.maximum(t, 0.0)))
+        return first if first <= dt else math.inf
+
+    def _raise(self, code: int, at: float | None = None) -> None:
+        """A controller error (caller holds the lock): mode 0 / state 4, motion disabled, speed zero; its
+        callback is queued for :meth:`_flush`."""
+        self._error = int(code)
+        self._mode, self._ready, self._enabled = 0, False, False
+        self._stop(at=at)
+        if self._connected:
+            self._pending.append(self._err_payload())
+
+    def _flush(self) -> None:
+        """Fire the error callbacks queued under the lock, outside it."""
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for payload in pending:
+            self._fire(self._error_cbs, payload)
 
     def _stop(self, at: float | None = None) -> None:
         if np.any(self._speed) or self._stopped_since is None:
