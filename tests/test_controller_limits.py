@@ -6,6 +6,7 @@ stricter of the two layers: nothing it lets through is refused by the limits it 
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 
 import numpy as np
@@ -379,3 +380,15 @@ def test_no_command_the_pipeline_passes_is_refused_by_the_controller_limits_it_c
         counts[kind] += 1
     assert not refused, f"{len(refused)} of {sum(counts.values())} pipeline outputs refused: {refused[:3]}"
     assert fastest > 0.99 * cfg.limits.tcp_mps  # the samples reached the limit the two layers share
+
+
+# -- real arm (opt-in) ----------------------------------------------------------------------------------
+
+
+@pytest.mark.skipif(not os.environ.get("SA_XARM_IP"), reason="set SA_XARM_IP to test against a real xArm")
+def test_real_arm_check():
+    """``run --arm xarm --check`` on the real controller: every line passes, and motion is never enabled
+    (the arm must be where the safety workspace allows)."""
+    cfg = config_from_dict({"arm": {"backend": "xarm", "xarm": {"ip": os.environ["SA_XARM_IP"]}}})
+    items = run_check(cfg)
+    assert all(i.ok for i in items), format_check(items)

@@ -30,14 +30,16 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 
 BEFORE_THE_KEY = {
-    "planner": {"model": "commit"},
+    "planner": {"model": "commit", "ho_belief": "fixed"},
     "intent": {"step_cost": "time", "rationality": 1.0},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
+    "limits": {"tcp_mps": 1.0},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
-move-generator HO the defaults, and a question's time 2.5 s)."""
+move-generator HO the defaults, and a question's time 2.5 s; session 10 HO following the tracked belief
+in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds)."""
 
 
 def _config(recorded: dict) -> Config:
