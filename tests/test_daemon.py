@@ -258,6 +258,17 @@ def test_stop_latches_zero_commands_until_resume(policy):
     assert s["stopped"] is False
 
 
+def test_stop_and_resume_verbs_latch_and_release_the_running_daemons_stop(ho):
+    c = ho.collector
+    for verb, stopped in (("stop", True), ("resume", False)):
+        i = len(c)
+        r = subprocess.run([*CLI, verb, "--cmd", ho.cmd], capture_output=True, text=True, timeout=60, check=False)
+        assert r.returncode == 0 and json.loads(r.stdout) == {"ok": True}, r.stderr
+        c.event(verb, timeout_s=10, start=i)
+        _, s = c.state(lambda s, stopped=stopped: s["stopped"] is stopped, timeout_s=10, start=i)
+        assert s["stop_tested"] is True  # a simulated arm: no self-test required
+
+
 # -- the planner worker ---------------------------------------------------------------------------------
 
 

@@ -102,15 +102,28 @@ def cmd_run(args: argparse.Namespace) -> int:
     return code
 
 
-def cmd_answer(args: argparse.Namespace) -> int:
+def _command(args: argparse.Namespace, body: dict[str, Any]) -> int:
+    """Send one protocol command to the running daemon, print its reply; exit 0 if it was applied, 1 if
+    refused (a ``TimeoutError``, exit 2, when no daemon answers)."""
     from ..io.client import request
     from ..io.security import client_curve
 
     cfg = load_config(args.config)
-    reply = request(args.cmd or cfg.zmq.cmd, {"cmd": "answer", "value": args.value}, timeout_s=args.timeout,
-                    curve=client_curve(cfg.zmq))
+    reply = request(args.cmd or cfg.zmq.cmd, body, timeout_s=args.timeout, curve=client_curve(cfg.zmq))
     print(json.dumps(reply))
     return 0 if reply.get("ok") else 1
+
+
+def cmd_answer(args: argparse.Namespace) -> int:
+    return _command(args, {"cmd": "answer", "value": args.value})
+
+
+def cmd_stop(args: argparse.Namespace) -> int:
+    return _command(args, {"cmd": "stop"})
+
+
+def cmd_resume(args: argparse.Namespace) -> int:
+    return _command(args, {"cmd": "resume"})
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
@@ -224,8 +237,13 @@ def add_parsers(sub: Any) -> None:
 
     a = sub.add_parser("answer", help="answer the pending question")
     a.add_argument("value", choices=["yes", "no"])
-    a.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
-    a.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the reply")
+    sub.add_parser("stop", help="latch the running daemon's stop (the arm is commanded zero)").set_defaults(
+        func=cmd_stop)
+    sub.add_parser("resume", help="release the stop and clear an arm fault (after a stop, passes the start-up "
+                   "stop self-test)").set_defaults(func=cmd_resume)
+    for c in (a, sub.choices["stop"], sub.choices["resume"]):
+        c.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
+        c.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the reply")
     a.set_defaults(func=cmd_answer)
 
     k = sub.add_parser("keygen", help="write CURVE keys for a daemon exposed beyond loopback, print the config")
