@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import HOConfig, HuberConfig, IntentConfig
-from ..geometry import FloatArray, integrate_pose, quat_angle, rotation_error
+from ..geometry import FloatArray, integrate_pose, quat_angle, rotation_error, turn
 
 
 def huber_value(d: FloatArray, h: HuberConfig) -> FloatArray:
@@ -88,6 +88,34 @@ def q_minus_v_at(
     cost = T * (huber_slope(d_t, cfg.translation) * per_t + huber_slope(d_r, cfg.rotation) * per_r)
     q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
     return q_val - v
+
+
+def q_minus_v_driven(
+    position: FloatArray, quat: FloatArray, user_linear: FloatArray | None, user_angular: FloatArray | None,
+    goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig,
+) -> FloatArray:
+    """:func:`q_minus_v_at` for an input that drives one part only (the joystick's mode): ``user_linear``
+    ``(..., 3)`` m/s with ``user_angular`` ``None``, or the reverse (rad/s). With the path step cost
+    the part not driven adds nothing (its pose does not move, its cost is zero), so only the driven
+    part's Huber terms are computed: the same value, without the other part's distances."""
+    if cfg.step_cost != "path":
+        lin = np.zeros(np.shape(user_angular)) if user_linear is None else user_linear
+        ang = np.zeros(np.shape(user_linear)) if user_angular is None else user_angular
+        return q_minus_v_at(position, quat, np.concatenate((lin, ang), axis=-1), goal_positions, goal_quats, cfg)
+    T = cfg.action_apply_time_s
+    if user_angular is None:
+        p = np.asarray(position)[..., None, :]
+        u = np.asarray(user_linear)[..., None, :]
+        d = np.sqrt(np.sum((goal_positions - p) ** 2, axis=-1))
+        d1 = np.sqrt(np.sum((goal_positions - (p + u * T)) ** 2, axis=-1))
+        h, speed = cfg.translation, np.sqrt(np.sum(u * u, axis=-1))
+    else:
+        q = np.asarray(quat)[..., None, :]
+        w = np.asarray(user_angular)[..., None, :]
+        d = quat_angle(goal_quats, q)
+        d1 = quat_angle(goal_quats, turn(q, w, T))
+        h, speed = cfg.rotation, np.sqrt(np.sum(w * w, axis=-1))
+    return T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h)
 
 
 def assistance_twists(

@@ -38,7 +38,7 @@ import numpy as np
 from ..config import Config
 from ..geometry import FloatArray, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
-from ..model.huber import q_minus_v_at
+from ..model.huber import q_minus_v_driven
 from ..model.reward import distance_reward, opposes
 from ..model.twists import (
     ho_angular,
@@ -120,10 +120,9 @@ class Rollouts:
                 r_lin[:, :, i] = ho_linear(p1, kp, w, cfg)
                 r_ang[:, :, i] = ho_angular(q1, kq, w, cfg)
                 if tracked and s + 1 < steps:
-                    u = np.zeros((C, G, 6))
-                    u[..., :3] = u_lin[:, :, i] if translating else 0.0
-                    u[..., 3:] = 0.0 if translating else u_ang[:, :, i]
-                    log_w = log_w - samples * q_minus_v_at(P[:, :, i], Q[:, :, i], u, kp, kq, cfg.intent)
+                    log_w = log_w - samples * q_minus_v_driven(
+                        P[:, :, i], Q[:, :, i], u_lin[:, :, i] if translating else None,
+                        None if translating else u_ang[:, :, i], kp, kq, cfg.intent)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)
@@ -131,9 +130,9 @@ class Rollouts:
             if s < watch_steps:
                 pos = np.broadcast_to(P, (C, G, A, 3))
                 quat = np.broadcast_to(Q, (C, G, A, 4))
-                u = np.concatenate((np.broadcast_to(u_lin, (C, G, A, 3)), np.broadcast_to(u_ang, (C, G, A, 3))),
-                                   axis=-1)
-                loglik -= samples * q_minus_v_at(pos, quat, u, kp, kq, cfg.intent)
+                loglik -= samples * q_minus_v_driven(
+                    pos, quat, np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
+                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent)
             P = P + t_lin * dt
             Q = turn(Q, t_ang, dt)
             r, reached = reward_at()
