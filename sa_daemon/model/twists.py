@@ -107,7 +107,8 @@ def ho_linear(position: FloatArray, goal_positions: FloatArray, weights: FloatAr
     w = _goal_weights(weights)
     if cfg.ho.generator == "gradient":
         return np.sum(w * assistance_linear(position[..., None, :], goal_positions, cfg.intent, cfg.ho), axis=-2)
-    error = np.sum(w * (goal_positions - np.asarray(position)[..., None, :]), axis=-2)
+    # sum_g w_g (x_g - x) = sum_g w_g x_g - x, the weights summing to 1: one product, not (..., G, 3) errors
+    error = np.einsum("...g,...gj->...j", w[..., 0], goal_positions) - np.asarray(position)
     return clip_norm(cfg.move.linear_gain * error, cfg.move.linear_max_mps)
 
 

@@ -27,8 +27,8 @@ Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 part on the orientation alone, and the user drives one of the two. So in translation mode the
 orientation of a rollout does not depend on ``g`` and is integrated once per ``(c, a)``; in rotation
 mode the position is. The quaternion work, the expensive part, is then ``G`` times smaller in
-translation mode. Tracked HO depends on ``g`` through its belief in both parts, so with it both arrays
-hold ``G`` rollouts; the moves' angular twist is still computed once per ``(c, a)`` in translation mode.
+translation mode. Tracked HO depends on ``g`` through its belief in the part the user does not drive
+too: that part of HO's pose alone is kept per goal, apart from the arrays of the other actions.
 """
 
 from __future__ import annotations
@@ -71,11 +71,16 @@ class Rollouts:
         ho = [i for i, k in enumerate(kind) if k is ActionKind.HO]
         mp = kp[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]  # (A, 3) move targets
         mq = kq[[a.goal if a.kind is ActionKind.MOVE else 0 for a in actions]]
-        # Positions vary with the user's goal in translation mode, orientations in rotation mode; both do
-        # when HO follows the tracked belief, which depends on the goal.
+        # Positions vary with the user's goal in translation mode, orientations in rotation mode. HO
+        # following the tracked belief depends on g in the other part too: that part of HO's pose is kept
+        # apart (``free``, (C, G, 3|4)), so the other actions keep a single copy of it.
         tracked = bool(ho) and cfg.planner.ho_belief == "tracked"
-        P = np.broadcast_to(positions[:, None, None, :], (C, G if translating or tracked else 1, A, 3)).copy()
-        Q = np.broadcast_to(quats[:, None, None, :], (C, 1 if translating and not tracked else G, A, 4)).copy()
+        P = np.broadcast_to(positions[:, None, None, :], (C, G if translating else 1, A, 3)).copy()
+        Q = np.broadcast_to(quats[:, None, None, :], (C, 1 if translating else G, A, 4)).copy()
+        h = ho[0] if ho else -1
+        if tracked:
+            free = np.broadcast_to((quats if translating else positions)[:, None, :],
+                                   (C, G, 4 if translating else 3)).copy()
         gp, gq = kp[None, :, None, :], kq[None, :, None, :]  # the user's goals, (1, G, 1, .)
         standoff = cfg.planner.user_standoff_m
         pre = pregrasp_points(kp, kq, standoff)[None, :, None, :]
@@ -97,8 +102,19 @@ class Rollouts:
             """(R_d without the bonus, reached) of every rollout's own goal at its pose, ``(C, G, A)``."""
             d_t = np.sqrt(np.sum((P - gp) ** 2, axis=-1))
             d_r = quat_angle(Q, gq)
+            if tracked and translating:
+                d_r[:, :, h] = quat_angle(free, kq)
+            elif tracked:
+                d_t[:, :, h] = np.sqrt(np.sum((free - kp) ** 2, axis=-1))
             reached = (d_t <= cfg.reward.goal_translation_m) & (d_r <= cfg.reward.goal_rotation_rad)
             return distance_reward(d_t, d_r, cfg.reward) - np.where(reached, cfg.reward.goal, 0.0), reached
+
+        def watched(array: FloatArray, free_part: bool) -> FloatArray:
+            """``array`` as ``(C, G, A, .)``, HO's column from ``free`` where that part is kept apart."""
+            out = np.broadcast_to(array, (C, G, A, array.shape[-1])).copy()
+            if tracked and free_part:
+                out[:, :, h] = free
+            return out
 
         tail = cfg.planner.terminal_s / cfg.reward.step_s  # the state at the horizon lasts this many paper steps
         r0, arrived = reward_at()
@@ -110,38 +126,44 @@ class Rollouts:
             u_lin = user_linear(P, gp, pre, speed[0], standoff) if translating else zero
             u_ang = zero if translating else user_angular(Q, gq, speed[1])
             r_lin = np.where(move_m, move_linear(P, mp, cfg.move), 0.0)
-            # (a move's orientation does not depend on g in translation mode, even where Q holds G copies)
-            r_ang = np.where(move_m, move_angular(Q[:, :1] if translating else Q, mq, cfg.move), 0.0)
-            r_ang = np.repeat(r_ang, Q.shape[1] // r_ang.shape[1], axis=1)
-            for i in ho:  # HO under its belief, after the user's twist
+            r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
+            if ho:  # HO under its belief, after the user's twist
                 w = np.exp(log_w - log_w.max(axis=-1, keepdims=True))
-                p1 = P[:, :, i] + (u_lin[:, :, i] if translating else 0.0) * t_apply
-                q1 = Q[:, :, i] if translating else turn(Q[:, :, i], u_ang[:, :, i], t_apply)
-                r_lin[:, :, i] = ho_linear(p1, kp, w, cfg)
-                r_ang[:, :, i] = ho_angular(q1, kq, w, cfg)
+                if translating:
+                    p1 = P[:, :, h] + u_lin[:, :, h] * t_apply
+                    q1 = free if tracked else Q[:, :, h]
+                else:
+                    p1 = free if tracked else P[:, :, h]
+                    q1 = turn(Q[:, :, h], u_ang[:, :, h], t_apply)
+                ho_lin, ho_ang = ho_linear(p1, kp, w, cfg), ho_angular(q1, kq, w, cfg)
+                if not (tracked and not translating):
+                    r_lin[:, :, h] = ho_lin
+                if not (tracked and translating):
+                    r_ang[:, :, h] = ho_ang
                 if tracked and s + 1 < steps:
                     log_w = log_w - samples * q_minus_v_driven(
-                        P[:, :, i], Q[:, :, i], u_lin[:, :, i] if translating else None,
-                        None if translating else u_ang[:, :, i], kp, kq, cfg.intent)
+                        P[:, :, h], Q[:, :, h], u_lin[:, :, h] if translating else None,
+                        None if translating else u_ang[:, :, h], kp, kq, cfg.intent)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
-            opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)
+            opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)  # (HO's free part: no input there)
             step_penalty = np.where(opposed & ~arrived, per_step, 0.0)
-            if s < watch_steps:
-                pos = np.broadcast_to(P, (C, G, A, 3))
-                quat = np.broadcast_to(Q, (C, G, A, 4))
+            if s < watch_steps:  # only the driven part enters the likelihood: HO's is in P or Q
                 loglik -= samples * q_minus_v_driven(
-                    pos, quat, np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
+                    np.broadcast_to(P, (C, G, A, 3)), np.broadcast_to(Q, (C, G, A, 4)),
+                    np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
                     None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent)
             P = P + t_lin * dt
             Q = turn(Q, t_ang, dt)
+            if tracked:  # the user does not drive this part: HO's share of the blend alone
+                free = turn(free, alpha * ho_ang, dt) if translating else free + alpha * ho_lin * dt
             r, reached = reward_at()
             total = total + np.where(arrived, 0.0, r * k + step_penalty + np.where(reached, cfg.reward.goal, 0.0))
             arrived = arrived | reached
             self.value[..., s + 1] = total + np.where(arrived, 0.0, r * tail)
             if s + 1 == watch_steps:
-                self.watch_positions = np.broadcast_to(P, (C, G, A, 3)).copy()
-                self.watch_quats = np.broadcast_to(Q, (C, G, A, 4)).copy()
+                self.watch_positions = watched(P, free_part=not translating)
+                self.watch_quats = watched(Q, free_part=translating)
                 self.watch_return = total.copy()  # the return so far, without the terminal charge
         self.loglik = loglik
 

@@ -48,6 +48,10 @@ from .snapshot import PlanResult, Snapshot
 
 MAX_BATCH = 20_000
 """Beliefs one question level may hold; a deeper level than this is not searched (a depth limit)."""
+GATHER_RATIO, MAX_GATHER = 4, 4_000_000
+"""``decide`` values a batch by one ``(n, G, A)`` gather where it has more than one start pose per
+``GATHER_RATIO`` nodes and the gather holds at most ``MAX_GATHER`` numbers, else by one matrix product
+per start pose."""
 
 
 def _answer_keys(start: np.ndarray, asked: np.ndarray, yes: np.ndarray) -> np.ndarray:
@@ -112,10 +116,14 @@ class WatchSearch:
         rows = np.arange(n)
         M = self._commits(R, steps)  # (C, G, A)
         if self.moves:
-            E = np.empty((n, M.shape[2]))
-            for cu in np.unique(c):  # one matrix product per start pose, not a (n, G, A) gather
-                at = c == cu
-                E[at] = B[at] @ M[cu]
+            starts = np.flatnonzero(np.bincount(c))  # the start poses present (np.unique sorts: slower)
+            if len(starts) * GATHER_RATIO > n or n * M.shape[1] * M.shape[2] > MAX_GATHER:
+                E = np.empty((n, M.shape[2]))
+                for cu in starts:  # one matrix product per start pose, not a (n, G, A) gather
+                    at = c == cu
+                    E[at] = B[at] @ M[cu]
+            else:  # many start poses, few nodes each: one gather beats a Python loop over them
+                E = np.einsum("ng,nga->na", B, M[c])
             act = E.argmax(axis=1)
             V, best = M[c, :, act], E[rows, act]
         else:
