@@ -149,6 +149,7 @@ async def test_stop_self_test_then_every_stop_source_latches_within_one_control_
         await stick.queue.put(None)
         await _until(lambda: d.ctl.stopped, what="stop latched on unplug")
         assert ("stop", {"source": "joystick_lost"}) in events
+        assert any(k == "fault" and f["source"] == "joystick" and "stop button" in f["detail"] for k, f in events)
         assert any(k == "input_lost" for k, _ in events)
     finally:
         d.request_stop("test over")

@@ -144,7 +144,9 @@ class Daemon:
             self.ctl.lose_input()
         self.event("input_back" if up else "input_lost", detail=text)
         if not up and not self.ctl.stopped:
-            # The person's stop button went with the joystick: latch the stop (resume once it is back).
+            # The person's stop button went with the joystick: a fault, and the stop latches (resume once
+            # it is back).
+            self.event("fault", source="joystick", detail=f"{text}: the stop button is not available")
             commands.stop(self, "joystick_lost")
 
     def set_gripper(self, closed: bool) -> None:
