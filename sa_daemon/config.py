@@ -484,6 +484,21 @@ class RecordConfig(_Section):
     flush_s: float = Field(1.0, gt=0, le=10, description="data reaches the disk at least this often (s)")
 
 
+class WebConfig(_Section):
+    """``sa-daemon web``: the page for the carer and the researcher (``docs/web.md``).
+
+    It listens on loopback unless TLS (``tls_cert``, ``tls_key``) and a token (``token_file``, made by
+    ``sa-daemon keygen DIR --web-token``) are set; ``web`` refuses a non-loopback ``listen`` without
+    them. With a token every request needs it (the page's address carries it once, then a cookie).
+    """
+
+    listen: str = Field("127.0.0.1:8080", min_length=3, description="HOST:PORT the page is served on")
+    tls_cert: str = Field("", description="PEM certificate file ('' = plain HTTP, loopback only)")
+    tls_key: str = Field("", description="PEM private key file of tls_cert")
+    token_file: str = Field("", description="file holding the access token ('' = none, loopback only)")
+    max_message_bytes: int = Field(4096, ge=64, le=65536, description="longer page messages are refused")
+
+
 
 
 class Config(_Section):
@@ -508,6 +523,7 @@ class Config(_Section):
     voice: VoiceConfig = VoiceConfig()
     zmq: ZmqConfig = ZmqConfig()
     record: RecordConfig = RecordConfig()
+    web: WebConfig = WebConfig()
 
     @model_validator(mode="after")
     def _check_method(self) -> Config:

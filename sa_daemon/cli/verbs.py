@@ -135,10 +135,29 @@ def cmd_monitor(args: argparse.Namespace) -> int:
     return monitor(args.pub or cfg.zmq.pub, duration_s=args.duration, once=args.once, curve=curve)
 
 
+def cmd_web(args: argparse.Namespace) -> int:
+    """Serve the page (``sa_daemon/web``) for the daemon at ``--pub``/``--cmd`` until SIGINT/SIGTERM."""
+    from ..io.security import client_curve
+    from ..web.server import run_web
+
+    cfg = load_config(args.config)
+    web = cfg.web.model_copy(update={"listen": args.listen}) if args.listen else cfg.web
+    run_web(web, args.pub or cfg.zmq.pub, args.cmd or cfg.zmq.cmd, client_curve(cfg.zmq))
+    return 0
+
+
 def cmd_keygen(args: argparse.Namespace) -> int:
     """Write CURVE keys (``sa_daemon.io.keygen``) and print the config lines that use them."""
-    from ..io.keygen import generate
+    from ..io.keygen import generate, write_web_token
 
+    if args.web_token:
+        path, written = write_web_token(args.dir, force=args.force)
+        print(f"web token {'written' if written else 'kept'}: {path} (secret, 0600)")
+        print(f"\n# sa-daemon web's config.toml (the page may now listen beyond loopback, with TLS)\n[web]\n"
+              f"token_file = {json.dumps(str(path))}\n# open https://HOST:PORT/?token=<the file's text> once on "
+              "the tablet; the page keeps it in a cookie")
+        if args.client is None and args.clients is None:
+            return 0
     if args.clients is not None and args.clients < 0:
         raise ValueError("keygen --clients: must be 0 or more")
     names = list(args.client or [])
@@ -237,6 +256,12 @@ def add_parsers(sub: Any) -> None:
 
     a = sub.add_parser("answer", help="answer the pending question")
     a.add_argument("value", choices=["yes", "no"])
+    w = sub.add_parser("web", help="the page for the carer and the researcher: belief, question, Stop (docs/web.md)")
+    w.add_argument("--listen", help="HOST:PORT (default: config web.listen, 127.0.0.1:8080)")
+    w.add_argument("--pub", help="the daemon's PUB endpoint (default: config zmq.pub)")
+    w.add_argument("--cmd", help="the daemon's command endpoint (default: config zmq.cmd)")
+    w.set_defaults(func=cmd_web)
+
     sub.add_parser("stop", help="latch the running daemon's stop (the arm is commanded zero)").set_defaults(
         func=cmd_stop)
     sub.add_parser("resume", help="release the stop and clear an arm fault (after a stop, passes the start-up "
@@ -252,6 +277,8 @@ def add_parsers(sub: Any) -> None:
     k.add_argument("--clients", type=int, metavar="N", help="N client key pairs named client1..clientN (default: 1 unless --client)")
     k.add_argument("--force", action="store_true", help="replace existing keys (a new server key invalidates "
                    "every client's curve_server_public)")
+    k.add_argument("--web-token", action="store_true", help="write DIR/web.token, the access token of sa-daemon web "
+                   "(only that, unless --client/--clients are given too)")
     k.set_defaults(func=cmd_keygen)
 
     pl = sub.add_parser("plot", help="Fig. 4 timeline of a recording (MCAP)")

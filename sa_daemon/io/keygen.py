@@ -94,3 +94,31 @@ def generate(directory: str | Path, clients: list[str], force: bool = False) -> 
     except OSError as e:
         raise KeygenError(f"cannot write keys in {d}: {e}") from None
     return res
+
+
+WEB_TOKEN = "web.token"
+
+
+def write_web_token(directory: str | Path, force: bool = False) -> tuple[Path, bool]:
+    """``DIR/web.token`` (0600): a random access token for ``sa-daemon web`` (``web.token_file``), 256
+    bits from :mod:`secrets`. An existing token is kept unless ``force``. Returns (path, written)."""
+    import secrets
+
+    d = Path(directory)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise KeygenError(f"cannot create {d}: {e}") from None
+    path = d / WEB_TOKEN
+    if path.exists() and not force:
+        return path.resolve(), False
+    tmp = Path(tempfile.mkdtemp(prefix=".keygen-", dir=d))  # 0700: nobody else can look in
+    try:
+        f = tmp / WEB_TOKEN
+        fd = os.open(f, os.O_WRONLY | os.O_CREAT | os.O_EXCL, SECRET_MODE)
+        with os.fdopen(fd, "w") as out:
+            out.write(secrets.token_urlsafe(32) + "\n")
+        os.replace(f, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path.resolve(), True

@@ -17,7 +17,7 @@ PROTOCOL_VERSION = 2
 TOPIC_STATE = b"state"
 TOPIC_EVENT = b"event"
 
-COMMANDS = ("status", "answer", "stop", "resume", "set_method")
+COMMANDS = ("status", "answer", "stop", "resume", "set_method", "scene")
 
 
 class RequestError(ValueError):

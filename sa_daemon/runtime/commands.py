@@ -37,6 +37,8 @@ def handle(d: Daemon, req: Request) -> dict[str, Any]:
     if req.cmd == "set_method":
         set_method(d, req.args["method"])
         return {"method": d.ctl.method}
+    if req.cmd == "scene":
+        return messages.scene(d.view)
     raise RequestError(f"unknown command {req.cmd!r}")
 
 

@@ -42,6 +42,21 @@ def status(v: View) -> dict[str, Any]:
     }
 
 
+def scene(v: View) -> dict[str, Any]:
+    """The ``scene`` reply of ``docs/protocol.md``: the running scene's objects and every target's grasp
+    poses (base frame, m), the table height and the start pose, for a view of the table."""
+    sc = v.scene_data
+    return {
+        "name": sc.name,
+        "table_z": round(float(sc.table_z), 6),
+        "start": sc.start.as_dict(),
+        "objects": [{"name": o.name, "shape": o.shape, "size": protocol.finite_list(o.size),
+                     "position": protocol.finite_list(o.position), "yaw": round(float(o.yaw), 6)}
+                    for o in sc.objects],
+        "goals": [{"target": g.target, "poses": [p.as_dict() for p in g.poses]} for g in sc.goals],
+    }
+
+
 def belief_list(v: View) -> list[dict[str, Any]]:
     tp = v.belief.target_probabilities()
     return [{"goal": g, "p": float(p)} for g, p in tp.items()]  # unrounded: sums to 1 within 1e-12

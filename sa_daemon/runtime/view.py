@@ -95,6 +95,11 @@ class View:
         return self._d.opts.scene.name
 
     @property
+    def scene_data(self) -> Any:
+        """The running scene (objects, goals with their grasp poses): what the ``scene`` reply describes."""
+        return self._d.opts.scene
+
+    @property
     def input_backend(self) -> str:
         return self._d.opts.input
 
