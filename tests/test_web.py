@@ -404,3 +404,22 @@ def test_in_chromium_the_keyboard_works_too(live, browser):
     c.event("stop", timeout_s=10, start=i, source="command")
     browser.find_element(By.ID, "resume").send_keys(Keys.ENTER)  # focus a button, press Enter
     c.event("resume", timeout_s=10, start=i)
+
+
+def test_in_chromium_a_bad_token_gets_nothing_and_the_right_one_the_live_page(live, browser, tmp_path):
+    d, _ = live
+    token = "t" * 43
+    (tmp_path / "token").write_text(token)
+    w = WebProc(tmp_path / "tok", d, f'[web]\ntoken_file = "{tmp_path / "token"}"\n')
+    try:
+        w.wait_listening()
+        browser.delete_all_cookies()
+        browser.get(w.url + "/?token=wrong")
+        assert browser.title != "sa-daemon" and "STOP" not in browser.page_source  # an empty 401
+        browser.get(w.url + "/?token=" + token)
+        assert browser.title == "sa-daemon"
+        _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states over the WebSocket")
+        browser.get(w.url + "/")  # the cookie alone, from now on
+        _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states with the cookie")
+    finally:
+        w.close()
