@@ -423,3 +423,20 @@ def test_in_chromium_a_bad_token_gets_nothing_and_the_right_one_the_live_page(li
         _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states with the cookie")
     finally:
         w.close()
+
+
+def test_in_chromium_the_page_says_when_the_daemon_goes_quiet(browser, tmp_path):
+    d = DaemonProc(tmp_path / "daemon", "--method", "ho", "--duration", "600", "--no-speech")
+    w = WebProc(tmp_path / "web", d)
+    try:
+        d.wait_ready()
+        w.wait_listening()
+        from selenium.webdriver.common.by import By
+
+        browser.get(w.url + "/")
+        _wait(lambda: browser.find_element(By.ID, "link").text == "live", 30, "live")
+        d.close()  # the daemon ends: no more states
+        _wait(lambda: "stale" in browser.find_element(By.ID, "link").text, 10, "the view marked stale")
+    finally:
+        w.close()
+        d.close()

@@ -20,7 +20,7 @@ function send(body) {
 function connect() {
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
   ws = new WebSocket(`${proto}//${location.host}/ws`);
-  ws.onopen = () => setBadge($("link"), "connected", true);
+  ws.onopen = () => setBadge($("link"), "waiting for the daemon", false);
   ws.onclose = () => { setBadge($("link"), "disconnected: retrying", false); setTimeout(connect, 1000); };
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
@@ -36,8 +36,11 @@ function setBadge(el, text, good) {
   el.className = "badge " + (good === undefined ? "" : good ? "ok" : "bad");
 }
 
+let lastStateAt = 0;       // performance.now() of the last state (ms)
+
 function onState(msg) {
   last = msg.state;
+  lastStateAt = performance.now();
   const rx = msg.rx_wall;
   render(last);
   // The frame that shows this state is painted after the next animation frame callback.
@@ -180,6 +183,14 @@ function init() {
     else if (key === "n" && !$("no").disabled) $("no").click();
   });
   connect();
+  // The view is only as good as its last state: say so when the daemon goes quiet.
+  setInterval(() => {
+    if (!ws || ws.readyState !== WebSocket.OPEN) return;
+    const age = (performance.now() - lastStateAt) / 1000;
+    if (lastStateAt === 0) setBadge($("link"), "waiting for the daemon", false);
+    else if (age > 1.0) setBadge($("link"), `no state for ${age.toFixed(0)} s: the view is stale`, false);
+    else setBadge($("link"), "live", true);
+  }, 250);
 }
 
 init();
