@@ -14,6 +14,7 @@ import asyncio
 import errno
 import json
 import time
+from collections import deque
 
 import evdev
 import numpy as np
@@ -24,9 +25,11 @@ from evdev import ecodes
 from helpers import free_port
 from test_joystick import JOY_CAPS, FakeBus, FakeDevice, absev, key
 
+from sa_daemon.cli.monitor import render
 from sa_daemon.config import config_from_dict
 from sa_daemon.control.safety import SafetyCode
 from sa_daemon.runtime.launch import Launch, build_daemon
+from sa_daemon.runtime.messages import state_message
 
 VC = "vc_set_cartesian_velocity"
 STOP_SAMPLES = 10
@@ -106,6 +109,8 @@ async def test_stop_self_test_then_every_stop_source_latches_within_one_control_
         sent = [c for c in fake.calls[mark:] if c.name == VC]
         assert sent and all(not any(c.args[0]) for c in sent), "a command moved the arm before the stop test"
         assert (await command("status"))["stop_tested"] is False
+        screen = render(state_message(d.view), deque())
+        assert screen.splitlines()[1].startswith("STOP NOT TESTED")  # sa-daemon monitor says so too
 
         # 2. The person presses stop, the carer resumes: the test passes and the arm follows the stick.
         await stick.queue.put(key(ecodes.BTN_PINKIE, 1))

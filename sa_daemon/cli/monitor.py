@@ -27,6 +27,8 @@ def render(state: dict[str, Any], events: deque[str]) -> str:
         "",
         "belief:",
     ]
+    if state.get("stop_tested") is False:
+        lines.insert(1, "STOP NOT TESTED: press stop, then resume (sa-daemon resume), before the arm moves")
     for b in sorted(state["belief"], key=lambda b: -b["p"]):
         n = round(b["p"] * BAR)
         lines.append(f"  {b['goal']:<32} {'#' * n}{'.' * (BAR - n)} {b['p']:.3f}")
