@@ -174,6 +174,11 @@ class InputConfig(_Section):
 
     linear_scale_mps: float = Field(0.2, gt=0)
     angular_scale_radps: float = Field(0.4, gt=0)
+    filter_hz: float = Field(
+        0.0, ge=0, le=50,
+        description="first-order low-pass on the stick against tremor, cutoff (Hz); 0 = off. Its delay at low "
+        "frequencies is 1 / (2 pi filter_hz) s (docs/profiles.md)",
+    )
 
 
 class LimitsConfig(_Section):
@@ -368,6 +373,18 @@ class JoystickConfig(_Section):
     axes: tuple[str, str, str] = Field(("ABS_X", "ABS_Y", "ABS_RZ"), description="evdev codes of x, y, z")
     signs: tuple[float, float, float] = Field((1.0, -1.0, 1.0), description="per-axis sign (+1 or -1)")
     deadzone: float = Field(0.05, ge=0, lt=1, description="smooth deadzone (fraction of full deflection)")
+    gains: tuple[float, float, float] = Field(
+        (1.0, 1.0, 1.0), description="per-axis gain after the deadzone (the result is clamped to [-1, 1])"
+    )
+    centre: tuple[float, float, float] | None = Field(
+        None, description="calibrated raw rest value per axis (sa-daemon calibrate); None = the middle of the range"
+    )
+    low: tuple[float, float, float] | None = Field(
+        None, description="calibrated raw value at full deflection down, per axis; None = the device's minimum"
+    )
+    high: tuple[float, float, float] | None = Field(
+        None, description="calibrated raw value at full deflection up, per axis; None = the device's maximum"
+    )
     button_mode: str = Field("BTN_TRIGGER", description="toggle translation/rotation")
     button_gripper: str = Field("BTN_THUMB", description="toggle gripper open/closed")
     button_yes: str = Field("BTN_THUMB2", description="answer yes")
@@ -377,6 +394,21 @@ class JoystickConfig(_Section):
     grab: bool = Field(False, description="exclusive access to the device")
     poll_s: float = Field(1.0, gt=0, description="how often a missing device is looked for (s)")
 
+    @model_validator(mode="after")
+    def _check(self) -> JoystickConfig:
+        if any(s not in (-1.0, 1.0) for s in self.signs):
+            raise ValueError("signs must be +1 or -1 per axis")
+        if any(not 0.1 <= g <= 3.0 for g in self.gains):
+            raise ValueError("gains must be between 0.1 and 3 per axis")
+        calib = (self.low, self.centre, self.high)
+        if any(c is not None for c in calib):
+            if any(c is None for c in calib):
+                raise ValueError("centre, low and high are calibrated together (sa-daemon calibrate): set all three")
+            for i, (lo, c, hi) in enumerate(zip(*calib)):  # type: ignore[call-overload]
+                if not lo < c < hi:
+                    raise ValueError(f"axis {i}: low < centre < high is needed, got {lo}, {c}, {hi}")
+        return self
+
 
 class SpeechConfig(_Section):
     """Spoken questions (pyttsx3 + espeak-ng, in one dedicated worker thread)."""
@@ -384,6 +416,7 @@ class SpeechConfig(_Section):
     enabled: bool = Field(True, description="speak questions (they are always published as events)")
     rate_wpm: int = Field(150, ge=50, le=400, description="words per minute")
     volume: float = Field(1.0, ge=0, le=1)
+    voice: str = Field("", max_length=64, description="espeak-ng voice, e.g. en-gb ('' = the engine's default)")
     wav_dir: str = Field("", description="also write each utterance to a WAV file here (empty: no files)")
     play: bool = Field(True, description="play through the sound card (off: WAV files only)")
     library: Literal["auto", "system", "wheel"] = Field(
@@ -484,6 +517,22 @@ class RecordConfig(_Section):
     flush_s: float = Field(1.0, gt=0, le=10, description="data reaches the disk at least this often (s)")
 
 
+class AskingConfig(_Section):
+    """What a person wants of the questions (their profile, ``docs/profiles.md``)."""
+
+    max_per_task: int = Field(0, ge=0, le=100, description="questions per task at most (0 = as the planner decides)")
+    answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
+        ("button", "command", "voice"),
+        description="where answers are taken from: the joystick's buttons, the protocol (and the page), the voice",
+    )
+
+
+class ProfilesConfig(_Section):
+    """Where ``run --profile NAME`` finds ``NAME.toml`` (``docs/profiles.md``)."""
+
+    dir: str = Field("/etc/sa-daemon/profiles", description="directory of the per-person profiles")
+
+
 class WebConfig(_Section):
     """``sa-daemon web``: the page for the carer and the researcher (``docs/web.md``).
 
@@ -524,6 +573,8 @@ class Config(_Section):
     zmq: ZmqConfig = ZmqConfig()
     record: RecordConfig = RecordConfig()
     web: WebConfig = WebConfig()
+    asking: AskingConfig = AskingConfig()
+    profiles: ProfilesConfig = ProfilesConfig()
 
     @model_validator(mode="after")
     def _check_method(self) -> Config:

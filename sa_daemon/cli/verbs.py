@@ -51,7 +51,7 @@ def launch_of(args: argparse.Namespace, exit_when_done: bool | None = None) -> L
     """``run``'s flags as a :class:`~.launch.Launch`."""
     return Launch(scene=args.scene_file or args.scene or DEFAULT_SCENE, tasks=tuple(args.task or ()),
                   input=args.input, duration_s=args.duration, seed=args.seed, progress=not args.quiet,
-                  exit_when_done=exit_when_done, user=args.user or "calibrated")
+                  exit_when_done=exit_when_done, user=args.user or "calibrated", profile=args.profile)
 
 
 def build_daemon(args: argparse.Namespace) -> Any:
@@ -146,6 +146,42 @@ def cmd_web(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Measure a person's stick (``io/calibrate.py``) and write it into their profile."""
+    import asyncio
+    import tomllib
+
+    import evdev
+
+    from ..config import ConfigError
+    from ..io.calibrate import CalibrationError, calibrate
+    from ..profile import Profile, parse_profile, profile_toml, resolve
+
+    cfg = load_config(args.config)
+    path = resolve(args.profile, cfg.profiles.dir)
+    device = next((evdev.InputDevice(p) for p in evdev.list_devices()
+                   if args.device in (p, evdev.InputDevice(p).name)), None)
+    if device is None:
+        raise ConfigError(f"calibrate --device: no input device {args.device!r} (evdev.list_devices)")
+    print(f"calibrating {device.name} ({device.path}), axes {', '.join(cfg.joystick.axes)}")
+    try:
+        result = asyncio.run(calibrate(device, cfg.joystick, args.rest, args.move))
+    except CalibrationError as e:
+        print(f"calibrate: {e}", file=sys.stderr)
+        return 1
+    finally:
+        device.close()
+    print(result.report())
+    old = parse_profile(tomllib.loads(path.read_text()), str(path)) if path.exists() else Profile(path.stem)
+    joystick = {**old.overrides.get("joystick", {}), **result.joystick_keys()}
+    new = Profile(old.name, old.summary, {**old.overrides, "joystick": joystick}, str(path))
+    new.apply(cfg)  # checked like any profile before it is written
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(profile_toml(new))
+    print(f"wrote {path} ([joystick] {', '.join(result.joystick_keys())}); use it with run --profile {args.profile}")
+    return 0
+
+
 def cmd_keygen(args: argparse.Namespace) -> int:
     """Write CURVE keys (``sa_daemon.io.keygen``) and print the config lines that use them."""
     from ..io.keygen import generate, write_web_token
@@ -235,6 +271,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-speech", action="store_true", help="publish questions without speaking them")
     p.add_argument("--seed", type=int, default=0, help="simulated user's random seed")
     p.add_argument("--user", metavar="NAME|FILE", help="simulated user profile (docs/simulated-user.md; default calibrated)")
+    p.add_argument("--profile", metavar="NAME|FILE", help="the person's profile: NAME.toml in profiles.dir, or a "
+                   "file (docs/profiles.md)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -270,6 +308,13 @@ def add_parsers(sub: Any) -> None:
         c.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
         c.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the reply")
     a.set_defaults(func=cmd_answer)
+
+    c = sub.add_parser("calibrate", help="measure a person's joystick (rest, range, noise) into their profile")
+    c.add_argument("--device", required=True, help="/dev/input/eventN or the device's name")
+    c.add_argument("--profile", required=True, metavar="NAME|FILE", help="the profile to write (created or updated)")
+    c.add_argument("--rest", type=float, default=3.0, help="seconds the stick is left at rest")
+    c.add_argument("--move", type=float, default=8.0, help="seconds the stick is moved to its limits")
+    c.set_defaults(func=cmd_calibrate)
 
     k = sub.add_parser("keygen", help="write CURVE keys for a daemon exposed beyond loopback, print the config")
     k.add_argument("dir", help="key directory (created; e.g. /etc/sa-daemon/curve)")

@@ -34,6 +34,7 @@ from ..model.model import Command, SharedAutonomyModel
 from ..model.twists import axes_to_twist
 from ..planner.snapshot import PlanResult, Snapshot
 from ..world.goalset import GoalSet
+from .lowpass import LowPass
 from .safety import SafetyPipeline, SafetyResult
 
 ZERO6 = np.zeros(6)
@@ -104,6 +105,8 @@ class Controller:
         self._asked: set[str] = set()
         self._mode = Mode.TRANSLATION
         self._axes = np.zeros(3)
+        self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
+        self._axes_out = np.zeros(3)  # the axes after it, as of the last tick
         self._t_input = -math.inf
         self._input_seq = 0
         self._speed = np.zeros(2)  # smoothed user speed (m/s, rad/s)
@@ -192,7 +195,7 @@ class Controller:
     @property
     def user_twist(self) -> FloatArray:
         """The user's twist (m/s, rad/s) of the last sample in the current mode."""
-        return axes_to_twist(self._axes, self._mode, self._cfg.input)
+        return axes_to_twist(self._axes_out, self._mode, self._cfg.input)
 
     @property
     def user_speed(self) -> tuple[float, float]:
@@ -213,6 +216,7 @@ class Controller:
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             return False
         self._axes = np.clip(a, -1.0, 1.0)
+        self._axes_out = self._axes.copy() if self._smooth.tau_s == 0.0 else self._axes_out
         self._t_input = t
         self._input_seq += 1
         return True
@@ -225,6 +229,8 @@ class Controller:
         """The input device is gone: axes zero and stale at once, so the next tick commands zero (the
         pipeline's stale stage) instead of waiting for ``stale_command_s``."""
         self._axes = np.zeros(3)
+        self._axes_out = np.zeros(3)
+        self._smooth.reset()  # zero at once, no glide
         self._t_input = -math.inf
 
     def set_mode(self, mode: Mode) -> bool:
@@ -310,8 +316,10 @@ class Controller:
         if self._question is not None or self._gripper_closed or not self._safety.stop_tested:
             return None
         b = self._belief
+        cap = self._cfg.asking.max_per_task
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
-                        self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed)
+                        self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
+                        questions_left=max(0, cap - len(self._asked)) if cap else None)
         self._issued[snap] = self._task
         return snap
 
@@ -394,6 +402,8 @@ class Controller:
         """The command for this control period at the arm's ``state``: the current action's twist blended
         with the user's (zero when the input is stale), then the safety pipeline."""
         fresh = self.input_fresh(t)
+        if self._smooth.tau_s > 0.0:  # the tremor filter runs at the control rate on the held axes
+            self._axes_out = self._smooth.update(self._axes, t)
         u = self.user_twist if fresh else ZERO6.copy()
         action = self._carried_action(t, state.pose)
         error = None

@@ -83,21 +83,30 @@ class JoystickMapper:
         if any(r.max <= r.min for r in self.ranges):
             raise ValueError("joystick: an axis reports an empty range (absinfo max <= min)")
         self.signs = np.asarray(cfg.signs, dtype=float)
+        self.gains = np.asarray(cfg.gains, dtype=float)
         self.buttons = {
             _code(getattr(cfg, f"button_{b.value}"), "BTN_"): b for b in Button
         }
-        self._raw = [(r.min + r.max) / 2.0 for r in self.ranges]
+        # (low, centre, high) raw values per axis: a person's calibration (sa-daemon calibrate), else the
+        # kernel's range with its middle as the centre
+        if cfg.centre is not None and cfg.low is not None and cfg.high is not None:
+            self.spans = [tuple(map(float, t)) for t in zip(cfg.low, cfg.centre, cfg.high, strict=True)]
+        else:
+            self.spans = [(float(r.min), (r.min + r.max) / 2.0, float(r.max)) for r in self.ranges]
+        self._raw = [c for _, c, _ in self.spans]
 
     def reset(self) -> None:
         """Centre every axis (device lost: the user's twist must be zero at once)."""
-        self._raw = [(r.min + r.max) / 2.0 for r in self.ranges]
+        self._raw = [c for _, c, _ in self.spans]
 
     def axes(self) -> np.ndarray:
-        """The three axes, normalised, clamped, deadzoned and signed."""
+        """The three axes: normalised on each side of the centre (a calibration may be asymmetric),
+        clamped, deadzoned, times the gain, clamped again, signed."""
         out = np.empty(3)
-        for i, (raw, r) in enumerate(zip(self._raw, self.ranges)):
-            v = min(1.0, max(-1.0, 2.0 * (raw - r.min) / (r.max - r.min) - 1.0))
-            out[i] = self.signs[i] * smooth_deadzone(v, self.cfg.deadzone)
+        for i, (raw, (lo, c, hi)) in enumerate(zip(self._raw, self.spans)):
+            v = (raw - c) / (hi - c) if raw >= c else (raw - c) / (c - lo)
+            v = min(1.0, max(-1.0, v))
+            out[i] = self.signs[i] * min(1.0, max(-1.0, self.gains[i] * smooth_deadzone(v, self.cfg.deadzone)))
         return out
 
     def handle(self, ev: InputEvent) -> Button | None:

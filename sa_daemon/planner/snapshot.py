@@ -22,6 +22,8 @@ class Snapshot:
     model's predicted user twists use (``None``: the norms of ``user_twist``); ``asked`` the high-level targets already asked about in this task. ``budget_s`` is the
     wall-clock deadline (``None``: no deadline) and ``node_budget`` a deterministic cap on expanded
     beliefs (``None``: none); with both ``None`` the planner runs to the proven optimum.
+    ``questions_left`` caps the questions the rest of the task may hold (the person's
+    ``asking.max_per_task``; ``None``: no cap, 0: no question).
     """
 
     goals: GoalSet
@@ -34,6 +36,7 @@ class Snapshot:
     budget_s: float | None = 0.1
     node_budget: int | None = None
     user_speed: tuple[float, float] | None = None
+    questions_left: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.goals, GoalSet):
@@ -55,6 +58,8 @@ class Snapshot:
             if len(speed) != 2 or not all(math.isfinite(v) and v >= 0 for v in speed):
                 raise ValueError("user_speed must be two finite, non-negative numbers (m/s, rad/s)")
         object.__setattr__(self, "user_speed", speed)
+        if self.questions_left is not None and (not isinstance(self.questions_left, int) or self.questions_left < 0):
+            raise ValueError("questions_left must be None or an integer >= 0")
 
     def to_dict(self) -> dict:
         """Plain (JSON-ready) form."""
@@ -69,6 +74,7 @@ class Snapshot:
             "budget_s": self.budget_s,
             "node_budget": self.node_budget,
             "user_speed": list(self.user_speed),
+            "questions_left": self.questions_left,
         }
 
     @classmethod
@@ -84,6 +90,7 @@ class Snapshot:
             budget_s=d["budget_s"],
             node_budget=d["node_budget"],
             user_speed=d.get("user_speed"),
+            questions_left=d.get("questions_left"),
         )
 
 

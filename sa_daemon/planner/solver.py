@@ -63,7 +63,8 @@ class _Search:
         self.nodes = 0
         self.n_q = len(prob.questions)
         self.all_asked = (1 << self.n_q) - 1
-        self.max_depth = min(self.n_q, prob.cfg.planner.max_questions)
+        self.max_depth = min(self.n_q, prob.cfg.planner.max_questions,
+                             prob.snap.questions_left if prob.snap.questions_left is not None else self.n_q)
         self.m_memo: dict[tuple[int, int], tuple[float, Action]] = {}
         self.v_memo: dict[tuple[int, int, int], tuple[float, Action, bool]] = {}
         self.free_memo: dict[tuple[int, int], tuple[float, Action]] = {}  # values no depth limit touched

@@ -81,7 +81,7 @@ class WatchSearch:
         self.n = max(1, round(pc.horizon_s / self.dt))
         self.n_w = min(self.n - 1, max(1, round(pc.watch_s / self.dt)))
         self.n_q = max(1, round(cfg.reward.question_time_s / self.dt))
-        self.max_q = pc.max_questions
+        self.max_q = pc.max_questions if snap.questions_left is None else min(pc.max_questions, snap.questions_left)
         p = cfg.intent.answer_p_correct
         qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
         self.L_yes = np.where(qi[:, None] == goals.target_index[None, :], p, 1.0 - p).reshape(len(qi), len(goals))

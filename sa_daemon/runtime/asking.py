@@ -69,6 +69,8 @@ class Asker:
         """Apply a yes/no answer to the pending question; :class:`RequestError` if there is none.
         ``detail`` (a voice answer's ``confidence``) goes into the ``answer`` event."""
         now = time.monotonic()
+        if source in ("button", "command", "voice") and source not in self._cfg.asking.answer_sources:
+            raise RequestError(f"answers by {source} are off (asking.answer_sources)")
         try:
             q = self._ctl.on_answer(yes, now)
         except NoQuestion as e:
@@ -120,6 +122,8 @@ class Asker:
             reason = heard.get("reason", "not a yes or no")
         elif heard["confidence"] < vc.min_confidence:
             reason = f"confidence below voice.min_confidence {vc.min_confidence:g}"
+        elif "voice" not in self._cfg.asking.answer_sources:
+            reason = "answers by voice are off (asking.answer_sources)"
         else:
             reason = None
         self._event("heard", **heard, accepted=reason is None, reason=reason,

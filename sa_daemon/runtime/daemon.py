@@ -342,6 +342,9 @@ class Daemon:
             self.event("ready", arm=self.arm.name if self.arm else opts.arm, input=opts.input, method=self.method,
                        scene=opts.scene.name,
                        pub=self.server.pub_endpoint, cmd=self.server.cmd_endpoint)  # type: ignore[union-attr]
+            if opts.profile is not None:
+                log.info("profile %s (%s): %s", opts.profile["name"], opts.profile["path"], ", ".join(opts.profile["keys"]))
+                self.event("profile", **opts.profile)
             waiters = [asyncio.create_task(self._stop_event.wait())] + tasks
             timeout = opts.duration_s
             done, _ = await asyncio.wait(waiters, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)

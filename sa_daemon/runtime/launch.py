@@ -36,6 +36,7 @@ class Launch:
     progress: bool = True
     exit_when_done: bool | None = None
     user: str = "calibrated"  # the simulated user's profile: a built-in name or a file (sim/users.py)
+    profile: str | None = None  # the person's profile: a name in profiles.dir or a file (profile.py)
 
 
 def build_daemon(cfg: Config, launch: Launch) -> Daemon:
@@ -54,10 +55,17 @@ def build_daemon(cfg: Config, launch: Launch) -> Daemon:
         from ..sim.users import load_user
 
         cfg = load_user(launch.user).apply(cfg)
+    profile = None
+    if launch.profile:  # the person's settings over the configuration (refused, naming the key, if wrong)
+        from ..profile import load_profile
+
+        profile = load_profile(launch.profile, cfg.profiles.dir)
+        cfg = profile.apply(cfg)
     exit_when_done = launch.duration_s is None if launch.exit_when_done is None else launch.exit_when_done
     opts = RunOptions(
         scene=scene, arm=cfg.arm.backend, input=launch.input, tasks=tasks, method=cfg.method,
         pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=launch.duration_s, record=cfg.record.path or None,
         seed=launch.seed, progress=launch.progress, exit_when_done=exit_when_done,
+        profile=None if profile is None else {"name": profile.name, "path": profile.path, "keys": profile.keys()},
     )
     return Daemon(cfg, opts)

@@ -25,3 +25,5 @@ class RunOptions:
     progress: bool = False
     #: With the simulated user and no duration: stop once every task has been done once.
     exit_when_done: bool = True
+    #: The person's profile applied at start (name, file, the keys it set), or ``None``.
+    profile: dict | None = None

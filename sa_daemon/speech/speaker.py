@@ -174,6 +174,8 @@ class Speaker:
             engine = self._factory()
             engine.setProperty("rate", self.cfg.rate_wpm)
             engine.setProperty("volume", self.cfg.volume)
+            if self.cfg.voice:
+                engine.setProperty("voice", self.cfg.voice)  # an espeak-ng voice name, e.g. en-gb
             self._available = True
         except Exception as e:  # noqa: BLE001 - no engine: say so once, go on without speech
             self._error = f"speech unavailable: {type(e).__name__}: {e}"
