@@ -103,6 +103,13 @@ class Asker:
 
     # -- voice (speech/listener.py) ----------------------------------------------------------------------
 
+    def voice_ready(self) -> None:
+        """The voice process has just become ready: a question said while it was starting (the planner
+        may ask before the recogniser has loaded) gets its listening window now."""
+        q = self._ctl.question
+        if q is not None and not (self.speaker and self.speaker.speaking):
+            self._listen(q)
+
     def _listen(self, q: Question) -> None:
         if self.voice is None or not self.voice.ready:
             return

@@ -101,6 +101,7 @@ async def wait_ready(d: Daemon) -> None:
         await asyncio.sleep(0.02)
     if voice is not None and voice.ready:
         d.event("voice_ready", source=voice.source, pid=voice.pid)
+        d.asker.voice_ready()
 
 
 async def shutdown(d: Daemon, tasks: list[asyncio.Task], exit_code: int) -> None:
