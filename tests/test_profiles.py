@@ -239,3 +239,58 @@ def test_run_with_a_profile_applies_it_announces_it_and_refuses_answers_from_a_s
                        timeout=60, check=False)
     assert r.returncode == 2 and "blend.alpha" in r.stderr
     assert tomllib.loads(prof.read_text())["name"] == "pat"
+
+
+# -- switching profile on a running daemon, through the protocol and the page ----------------------------------
+
+
+def test_set_profile_switches_between_tasks_and_is_refused_while_the_arm_moves(tmp_path):
+    import asyncio as aio
+
+    import aiohttp
+    from test_web import WebProc
+
+    pdir = tmp_path / "profiles"
+    pdir.mkdir()
+    (pdir / "sam.toml").write_text('name = "sam"\n[blend]\nalpha = 0.3\n[speech]\nrate_wpm = 120\n')
+    (pdir / "broken.toml").write_text('name = "broken"\n[blend]\nalpha = 0.95\n')
+    d = DaemonProc(tmp_path / "d", "--method", "ho", "--duration", "600", "--no-speech",
+                   config=f'[profiles]\ndir = "{pdir}"\n')
+    try:
+        d.wait_ready()
+        c = d.collector
+        c.state(lambda s: any(s["command_twist"]), timeout_s=30, what="the arm moving")
+        r = d.request({"cmd": "set_profile", "profile": "sam"})
+        assert not r["ok"] and "the arm is moving" in r["error"]
+        st = d.request({"cmd": "status"})
+        assert st["profile"] is None and st["profiles"] == ["broken", "sam"]
+        for bad, why in (("../etc/passwd", "no path"), ("nobody", "cannot read"), ("broken", "blend.alpha")):
+            assert d.request({"cmd": "stop"})["ok"]
+            c.state(lambda s: not any(s["command_twist"]), timeout_s=10, start=len(c))
+            r = d.request({"cmd": "set_profile", "profile": bad})
+            assert not r["ok"] and why in r["error"], r
+        i = len(c)
+        r = d.request({"cmd": "set_profile", "profile": "sam"})
+        assert r == {"ok": True, "profile": "sam", "keys": ["blend.alpha", "speech.rate_wpm"]}
+        _, e = c.event("profile", timeout_s=10, start=i)
+        assert e["name"] == "sam"
+        c.event("planner_restart", timeout_s=10, start=i, reason="profile switched")
+        assert d.request({"cmd": "status"})["profile"] == "sam"
+        # the page offers the profiles and switches too
+        w = WebProc(tmp_path / "web", d)
+        try:
+            w.wait_listening()
+
+            async def run():
+                async with aiohttp.ClientSession() as s, s.ws_connect(w.url + "/ws") as ws:
+                    await ws.send_str('{"cmd": "set_profile", "profile": "sam"}')
+                    while True:
+                        m = json.loads((await ws.receive(timeout=10)).data)
+                        if m["type"] == "reply":
+                            return m
+
+            assert aio.run(run())["profile"] == "sam"
+        finally:
+            w.close()
+    finally:
+        d.close()

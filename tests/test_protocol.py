@@ -214,3 +214,10 @@ def test_encode_refuses_non_finite_numbers(bad):
 
 def test_finite_list_rounds_and_zeroes_non_finite():
     assert protocol.finite_list([1.23456789, math.nan, math.inf, -2.0], ndigits=3) == [1.235, 0.0, 0.0, -2.0]
+
+
+@pytest.mark.parametrize("name", ["../etc/passwd", "a/b", "alex.toml", "", ".hidden", 5, None, "x" * 65])
+def test_set_profile_takes_a_plain_name_only(name):
+    with pytest.raises(RequestError, match="profile name"):
+        parse_request(_req({"cmd": "set_profile", "profile": name}))
+    assert parse_request(_req({"cmd": "set_profile", "profile": "alex-2.left_hand"})).args["profile"] == "alex-2.left_hand"

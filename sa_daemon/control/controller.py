@@ -392,6 +392,14 @@ class Controller:
         self._safety.resume()
         return pending and self._safety.stop_tested
 
+    def reconfigure(self, cfg: Config) -> None:
+        """Take a person's new settings (a profile switched between tasks: the assistance level, the tremor
+        filter, the questions they want); the task, belief and plan go on."""
+        self._cfg = cfg
+        self._model = SharedAutonomyModel(cfg)
+        self._smooth = LowPass(cfg.input.filter_hz)
+        self._axes_out = self._axes.copy()
+
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""
         self._safety.require_stop_test()

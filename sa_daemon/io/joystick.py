@@ -138,8 +138,20 @@ class EvdevJoystick:
         self.cfg = cfg
         self.on_axes, self.on_button, self.on_link = on_axes, on_button, on_link
         self.mapper: JoystickMapper | None = None
+        self._ranges: dict[int, AxisRange] = {}  # every absolute axis of the connected device
         self.device_name: str | None = None
         self.connected = False
+
+    def reconfigure(self, cfg: JoystickConfig) -> None:
+        """A person's mapping and calibration from now on; ``ValueError`` (and nothing changes) if the
+        connected device lacks an axis it names."""
+        check_codes(cfg)
+        mapper = None
+        if self.mapper is not None and self.connected:
+            mapper = JoystickMapper(cfg, dict(zip(self.mapper.axis_codes, self.mapper.ranges)) | self._ranges)
+        self.cfg = cfg
+        if mapper is not None:
+            self.mapper = mapper
 
     def _find(self) -> tuple[Any | None, str | None]:
         """The first device with the configured axes and stop button, or ``None`` and why a device that
@@ -182,6 +194,7 @@ class EvdevJoystick:
                 await asyncio.sleep(self.cfg.poll_s)
                 continue
             announced_missing = False
+            self._ranges = ranges_of(dev, sorted({c for c, _ in dev.capabilities().get(ecodes.EV_ABS, [])}))
             self.mapper = JoystickMapper(self.cfg, ranges_of(dev, [_code(n, "ABS_") for n in self.cfg.axes]))
             self.device_name, self.connected = dev.name, True
             if self.cfg.grab:

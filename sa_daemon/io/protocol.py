@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,7 +18,9 @@ PROTOCOL_VERSION = 2
 TOPIC_STATE = b"state"
 TOPIC_EVENT = b"event"
 
-COMMANDS = ("status", "answer", "stop", "resume", "set_method", "scene")
+COMMANDS = ("status", "answer", "stop", "resume", "set_method", "scene", "set_profile")
+#: A profile named over the protocol: a name in ``profiles.dir``, never a path.
+PROFILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
 
 class RequestError(ValueError):
@@ -80,7 +83,7 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
     if cmd not in COMMANDS:
         raise RequestError(f"unknown command {cmd[:40]!r} (one of {', '.join(COMMANDS)})")
     args = {k: v for k, v in obj.items() if k != "cmd"}
-    allowed = {"answer": {"value"}, "set_method": {"method"}}.get(cmd, set())
+    allowed = {"answer": {"value"}, "set_method": {"method"}, "set_profile": {"profile"}}.get(cmd, set())
     extra = sorted(set(args) - allowed - {"id"})
     if extra:
         raise RequestError(f"{cmd}: unexpected field(s) {', '.join(repr(e[:40]) for e in extra[:5])}")
@@ -88,6 +91,10 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
         value = args.get("value")
         if value not in ("yes", "no"):
             raise RequestError('answer: "value" must be "yes" or "no"')
+    if cmd == "set_profile":
+        name = args.get("profile")
+        if not isinstance(name, str) or not PROFILE_NAME.match(name) or name.endswith(".toml"):
+            raise RequestError('set_profile: "profile" must be a profile name (letters, digits, _ . -; no path)')
     if cmd == "set_method":
         method = args.get("method")
         if not isinstance(method, str) or method not in METHODS:

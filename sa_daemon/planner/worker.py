@@ -144,6 +144,11 @@ class PlannerWorker:
                 proc.join(1.0)
         self._proc, self.ready, self.in_flight = None, False, None
 
+    def reconfigure(self, cfg_data: dict) -> None:
+        """Plan with a new configuration from now on: a new process (the old one is killed)."""
+        self._cfg_data = cfg_data
+        self.restart()
+
     def restart(self) -> None:
         """Kill the current process at once (hung or dead) and spawn a new one."""
         self._detach()

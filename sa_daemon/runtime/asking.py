@@ -40,6 +40,12 @@ class Asker:
         self.voice = voice  # speech.listener.VoiceListener when voice.enabled
         self._loop: asyncio.AbstractEventLoop | None = None
 
+    def reconfigure(self, cfg: Config) -> None:
+        """A person's profile: the answer sources they use, their voice, rate and volume."""
+        self._cfg = cfg
+        if self.speaker is not None:
+            self.speaker.configure(cfg.speech)
+
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         """The event loop that speech and voice callbacks are moved onto."""
         self._loop = loop

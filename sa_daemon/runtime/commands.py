@@ -39,6 +39,8 @@ def handle(d: Daemon, req: Request) -> dict[str, Any]:
         return {"method": d.ctl.method}
     if req.cmd == "scene":
         return messages.scene(d.view)
+    if req.cmd == "set_profile":
+        return set_profile(d, req.args["profile"])
     raise RequestError(f"unknown command {req.cmd!r}")
 
 
@@ -79,6 +81,28 @@ def resume(d: Daemon) -> None:
     d.event("resume")
     if passed:
         d.event("stop_test", passed=True)
+
+
+def set_profile(d: Daemon, name: str) -> dict[str, Any]:
+    """Switch the person's profile (between tasks): refused while the arm moves, or when the profile is
+    missing or invalid (the reason names the key); nothing changes then."""
+    from ..config import ConfigError
+    from ..profile import load_profile
+
+    if np.any(d.ctl.last.safety.twist != 0.0):
+        raise RequestError("the arm is moving: stop it (or let the task end) before switching profile")
+    base = d.opts.base_config if d.opts.base_config is not None else d.cfg
+    try:
+        profile = load_profile(name, d.cfg.profiles.dir)
+        cfg = profile.apply(base)
+        if d.joystick is not None:
+            d.joystick.reconfigure(cfg.joystick)
+    except (ConfigError, ValueError) as e:
+        raise RequestError(f"set_profile: {e}") from None
+    d.opts.profile = {"name": profile.name, "path": profile.path, "keys": profile.keys()}
+    d.reconfigure(cfg)
+    d.event("profile", **d.opts.profile)
+    return {"profile": profile.name, "keys": profile.keys()}
 
 
 def set_method(d: Daemon, method: str) -> None:

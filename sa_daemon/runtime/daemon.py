@@ -149,6 +149,18 @@ class Daemon:
             self.event("fault", source="joystick", detail=f"{text}: the stop button is not available")
             commands.stop(self, "joystick_lost")
 
+    def reconfigure(self, cfg: Config) -> None:
+        """A person's profile from now on (``commands.set_profile``): the controller, the questions and
+        answers, the speech, and a planner worker planning with the new assistance level."""
+        log.info("reconfigured: %s", self.opts.profile)
+        self.cfg = cfg
+        self.ctl.reconfigure(cfg)
+        self.asker.reconfigure(cfg)
+        if self.worker is not None:
+            old = self.worker.pid
+            self.worker.reconfigure(cfg.model_dump(mode="json"))
+            self.event("planner_restart", reason="profile switched", old_pid=old, pid=self.worker.pid)
+
     def set_gripper(self, closed: bool) -> None:
         if self.arm is None:
             return

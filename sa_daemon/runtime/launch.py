@@ -55,6 +55,7 @@ def build_daemon(cfg: Config, launch: Launch) -> Daemon:
         from ..sim.users import load_user
 
         cfg = load_user(launch.user).apply(cfg)
+    base = cfg  # profiles switched at run time apply over this
     profile = None
     if launch.profile:  # the person's settings over the configuration (refused, naming the key, if wrong)
         from ..profile import load_profile
@@ -67,5 +68,6 @@ def build_daemon(cfg: Config, launch: Launch) -> Daemon:
         pub=cfg.zmq.pub, cmd=cfg.zmq.cmd, duration_s=launch.duration_s, record=cfg.record.path or None,
         seed=launch.seed, progress=launch.progress, exit_when_done=exit_when_done,
         profile=None if profile is None else {"name": profile.name, "path": profile.path, "keys": profile.keys()},
+        base_config=base,
     )
     return Daemon(cfg, opts)

@@ -29,6 +29,8 @@ def status(v: View) -> dict[str, Any]:
         "planner": v.planner(),
         "stopped": v.stopped,
         "stop_tested": v.stop_tested,
+        "profile": v.profile,
+        "profiles": v.profiles(),
         "assist": v.assist,
         "uptime_s": round(v.t, 3),
         "scene": v.scene,

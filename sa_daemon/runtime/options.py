@@ -4,6 +4,7 @@ command line and the configuration."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..world.scene import Scene
 
@@ -25,5 +26,7 @@ class RunOptions:
     progress: bool = False
     #: With the simulated user and no duration: stop once every task has been done once.
     exit_when_done: bool = True
-    #: The person's profile applied at start (name, file, the keys it set), or ``None``.
+    #: The person's profile in force (name, file, the keys it set), or ``None``.
     profile: dict | None = None
+    #: The configuration without a person's profile (what ``set_profile`` applies a profile over).
+    base_config: Any = None

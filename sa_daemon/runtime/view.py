@@ -88,6 +88,21 @@ class View:
     def stop_tested(self) -> bool:
         return self._d.ctl.stop_tested
 
+    @property
+    def profile(self) -> str | None:
+        """The person's profile in force (its name), or ``None``."""
+        p = self._d.opts.profile
+        return None if p is None else p["name"]
+
+    def profiles(self) -> list[str]:
+        """The profiles ``set_profile`` can switch to: the names in ``profiles.dir``."""
+        from pathlib import Path
+
+        try:
+            return sorted(p.stem for p in Path(self._d.cfg.profiles.dir).glob("*.toml"))
+        except OSError:
+            return []
+
     # -- the daemon --------------------------------------------------------------------------------------
 
     @property

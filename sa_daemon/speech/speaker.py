@@ -106,6 +106,7 @@ class Speaker:
         self._error: str | None = None
         self._player_path = shutil.which(PLAYER) if cfg.play else None
         self.dropped = 0
+        self._reconfigured = False  # configure() was called: set voice, rate, volume before the next utterance
         self.busy_since: float | None = None  # time.monotonic() when the current utterance started
         self._player: subprocess.Popen | None = None  # the aplay process playing now
         self._count = 0
@@ -164,6 +165,11 @@ class Speaker:
             return False
         return True
 
+    def configure(self, cfg: Any) -> None:
+        """New voice, rate and volume (a person's profile), used from the next utterance on."""
+        self.cfg = cfg
+        self._reconfigured = True
+
     @property
     def speaking(self) -> bool:
         """An utterance is being synthesised or played (or waits for that)."""
@@ -186,6 +192,12 @@ class Speaker:
             text = self._q.get()
             if text is None:
                 return
+            if self._reconfigured:
+                self._reconfigured = False
+                engine.setProperty("rate", self.cfg.rate_wpm)
+                engine.setProperty("volume", self.cfg.volume)
+                if self.cfg.voice:
+                    engine.setProperty("voice", self.cfg.voice)
             self.busy_since = time.monotonic()
             try:
                 spoken = self._speak(engine, text)

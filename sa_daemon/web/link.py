@@ -22,7 +22,7 @@ from ..io import protocol
 from ..io.security import ClientCurve, apply_client
 
 #: What a page may ask of the daemon (``docs/web.md``).
-PAGE_COMMANDS = ("answer", "stop", "resume", "set_method", "status", "scene")
+PAGE_COMMANDS = ("answer", "stop", "resume", "set_method", "status", "scene", "set_profile")
 
 OnMessage = Callable[[str, dict[str, Any], float], Awaitable[None] | None]
 """``on_message(topic, message, received_wall_s)`` for every ``state`` and ``event`` message."""

@@ -26,8 +26,8 @@ function connect() {
     const msg = JSON.parse(ev.data);
     if (msg.type === "state") onState(msg);
     else if (msg.type === "event") onEvent(msg.event);
-    else if (msg.type === "hello") { scene = msg.scene; }
-    else if (msg.type === "reply" || msg.type === "refused") window.saReplies.push(msg);
+    else if (msg.type === "hello") { scene = msg.scene; send({cmd: "status"}); }
+    else if (msg.type === "reply" || msg.type === "refused") onReply(msg);
   };
 }
 
@@ -153,6 +153,18 @@ function drawTable(s) {
   }
 }
 
+function onReply(msg) {
+  window.saReplies.push(msg);
+  if (msg.type === "reply" && msg.cmd === "status" && msg.ok) {
+    const sel = $("profile");
+    sel.replaceChildren(...(msg.profiles || []).map((n) => { const o = document.createElement("option"); o.value = o.textContent = n; return o; }));
+    if (msg.profile) sel.value = msg.profile;
+    $("profile-note").textContent = msg.profile ? `in force: ${msg.profile}` : "no profile";
+  } else if (msg.cmd === "set_profile" || (msg.type === "refused")) {
+    $("profile-note").textContent = msg.ok ? `switched to ${msg.profile}` : (msg.error || msg.reason || "");
+  }
+}
+
 function onEvent(e) {
   const li = document.createElement("li");
   const detail = Object.entries(e).filter(([k]) => k !== "t" && k !== "type")
@@ -174,6 +186,7 @@ function init() {
   $("yes").onclick = () => send({cmd: "answer", value: "yes"});
   $("no").onclick = () => send({cmd: "answer", value: "no"});
   $("method").onchange = (e) => send({cmd: "set_method", method: e.target.value});
+  $("switch").onclick = () => { if ($("profile").value) send({cmd: "set_profile", profile: $("profile").value}); };
   document.addEventListener("keydown", (e) => {
     if (e.target.tagName === "SELECT" || e.ctrlKey || e.metaKey || e.altKey) return;
     const key = e.key.toLowerCase();
