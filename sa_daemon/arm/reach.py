@@ -64,3 +64,24 @@ def reachable_scene(scene: Scene, kin: ArmKinematics, margin_rad: float) -> Scen
             log.info("%s: %d of %d grasp poses reachable by the arm", g.target, len(kept), len(g.poses))
         goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
     return replace(scene, goals=tuple(goals))
+
+
+def reachable_goals(scene: Scene, kin: ArmKinematics, margin_rad: float) -> tuple[Scene, list[dict[str, str]]]:
+    """``scene`` with each goal's poses restricted to the reachable ones, and goals with none dropped:
+    ``(scene, [{"target": ..., "reason": ...}])`` (a live scene from a camera: some of its grasps may be
+    out of reach; the rest can still be driven to). ``ValueError`` if no goal is left."""
+    from .kinematics import start_configuration
+
+    q_start = start_configuration(kin, scene.start)
+    goals: list[Goal] = []
+    dropped: list[dict[str, str]] = []
+    for g in scene.goals:
+        kept = tuple(p for p in g.poses if reaches(kin, p, q_start, margin_rad))
+        if kept:
+            goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
+        else:
+            dropped.append({"target": g.target, "reason": f"none of its {len(g.poses)} grasp poses is reachable by "
+                            f"the xArm-6 within its joint bounds less {margin_rad} rad"})
+    if not goals:
+        raise ValueError(f"scene {scene.name!r}: no goal is reachable by the xArm-6")
+    return replace(scene, goals=tuple(goals)), dropped

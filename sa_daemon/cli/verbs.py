@@ -118,6 +118,25 @@ def cmd_answer(args: argparse.Namespace) -> int:
     return _command(args, {"cmd": "answer", "value": args.value})
 
 
+def cmd_scene_push(args: argparse.Namespace) -> int:
+    """Send a scene file (TOML or JSON, ``docs/scenes.md``) to the running daemon as ``set_scene``."""
+    import tomllib
+
+    from ..config import ConfigError
+
+    path = Path(args.file)
+    try:
+        text = path.read_text()
+        data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"scene push: {path}: {e}") from None
+    body: dict[str, Any] = {"cmd": "set_scene", "scene": data, "when": args.when}
+    if args.marker_to_base:
+        pose = json.loads(args.marker_to_base)
+        body["marker_to_base"] = pose
+    return _command(args, body)
+
+
 def cmd_stop(args: argparse.Namespace) -> int:
     return _command(args, {"cmd": "stop"})
 
@@ -299,6 +318,18 @@ def add_parsers(sub: Any) -> None:
     w.add_argument("--pub", help="the daemon's PUB endpoint (default: config zmq.pub)")
     w.add_argument("--cmd", help="the daemon's command endpoint (default: config zmq.cmd)")
     w.set_defaults(func=cmd_web)
+
+    sc = sub.add_parser("scene", help="live scenes: push a scene to the running daemon (set_scene)")
+    scsub = sc.add_subparsers(dest="scene_verb", required=True)
+    push = scsub.add_parser("push", help="send a scene file (TOML or JSON, docs/scenes.md) as set_scene")
+    push.add_argument("file")
+    push.add_argument("--when", choices=("now", "next_task"), default="now",
+                      help="now (the arm must be stopped) or at the simulated user's next task")
+    push.add_argument("--marker-to-base", metavar="JSON", help='the scene is in a marker frame: '
+                      '\'{"position": [x, y, z], "quat_wxyz": [w, x, y, z]}\' maps it to the base frame')
+    push.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
+    push.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
+    push.set_defaults(func=cmd_scene_push)
 
     sub.add_parser("stop", help="latch the running daemon's stop (the arm is commanded zero)").set_defaults(
         func=cmd_stop)

@@ -392,6 +392,16 @@ class Controller:
         self._safety.resume()
         return pending and self._safety.stop_tested
 
+    def new_goals(self, goals: GoalSet | tuple) -> None:
+        """A new scene's goals (``set_scene``): uniform belief over them, nothing asked, no plan; plans
+        for snapshots of the old scene are moot. The stop, the mode and the gripper stay as they are."""
+        self._task += 1
+        self._scene_goals = goals
+        self._belief = self._model.initial_belief(goals)
+        self._asked.clear()
+        self._question = None
+        self.drop_plan()
+
     def reconfigure(self, cfg: Config) -> None:
         """Take a person's new settings (a profile switched between tasks: the assistance level, the tremor
         filter, the questions they want); the task, belief and plan go on."""

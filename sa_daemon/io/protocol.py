@@ -18,7 +18,7 @@ PROTOCOL_VERSION = 2
 TOPIC_STATE = b"state"
 TOPIC_EVENT = b"event"
 
-COMMANDS = ("status", "answer", "stop", "resume", "set_method", "scene", "set_profile")
+COMMANDS = ("status", "answer", "stop", "resume", "set_method", "scene", "set_profile", "set_scene")
 #: A profile named over the protocol: a name in ``profiles.dir``, never a path.
 PROFILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
@@ -83,7 +83,8 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
     if cmd not in COMMANDS:
         raise RequestError(f"unknown command {cmd[:40]!r} (one of {', '.join(COMMANDS)})")
     args = {k: v for k, v in obj.items() if k != "cmd"}
-    allowed = {"answer": {"value"}, "set_method": {"method"}, "set_profile": {"profile"}}.get(cmd, set())
+    allowed = {"answer": {"value"}, "set_method": {"method"}, "set_profile": {"profile"},
+               "set_scene": {"scene", "when", "marker_to_base"}}.get(cmd, set())
     extra = sorted(set(args) - allowed - {"id"})
     if extra:
         raise RequestError(f"{cmd}: unexpected field(s) {', '.join(repr(e[:40]) for e in extra[:5])}")
@@ -95,6 +96,13 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
         name = args.get("profile")
         if not isinstance(name, str) or not PROFILE_NAME.match(name) or name.endswith(".toml"):
             raise RequestError('set_profile: "profile" must be a profile name (letters, digits, _ . -; no path)')
+    if cmd == "set_scene":
+        if not isinstance(args.get("scene"), dict):
+            raise RequestError('set_scene: "scene" must be an object (the scene file\'s format as JSON)')
+        if args.get("when", "now") not in ("now", "next_task"):
+            raise RequestError('set_scene: "when" must be "now" or "next_task"')
+        if args.get("marker_to_base") is not None and not isinstance(args["marker_to_base"], dict):
+            raise RequestError('set_scene: "marker_to_base" must be {"position": [...], "quat_wxyz": [...]}')
     if cmd == "set_method":
         method = args.get("method")
         if not isinstance(method, str) or method not in METHODS:

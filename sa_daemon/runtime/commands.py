@@ -41,6 +41,8 @@ def handle(d: Daemon, req: Request) -> dict[str, Any]:
         return messages.scene(d.view)
     if req.cmd == "set_profile":
         return set_profile(d, req.args["profile"])
+    if req.cmd == "set_scene":
+        return set_scene(d, req.args)
     raise RequestError(f"unknown command {req.cmd!r}")
 
 
@@ -103,6 +105,41 @@ def set_profile(d: Daemon, name: str) -> dict[str, Any]:
     d.reconfigure(cfg)
     d.event("profile", **d.opts.profile)
     return {"profile": profile.name, "keys": profile.keys()}
+
+
+def set_scene(d: Daemon, args: dict[str, Any]) -> dict[str, Any]:
+    """A scene from perception (``world/live.py``): applied now with the arm stopped, or at the simulated
+    user's next task; refused (nothing changes) when invalid, when no goal is reachable, while the arm
+    is not stopped (``now``), or when the simulated user's tasks are not in it."""
+    from ..arm.backends import backend
+    from ..world.live import scene_from_request
+    from ..world.scene import SceneError
+
+    when = args.get("when", "now")
+    try:
+        scene = scene_from_request(args, d.opts.scene)
+        dropped: list[dict[str, str]] = []
+        if backend(d.opts.arm).joints:
+            from ..arm.kinematics import ArmKinematics
+            from ..arm.reach import reachable_goals
+
+            scene, dropped = reachable_goals(scene, ArmKinematics(), d.cfg.safety.joint_margin_rad)
+    except (SceneError, ValueError) as e:
+        raise RequestError(str(e)) from None
+    if d.sim is not None:
+        missing = [t for t in d.sim.sim.tasks if t not in scene.targets]
+        if missing:
+            raise RequestError(f"set_scene: the simulated user's task {missing[0]} is not in the scene")
+        if when == "now":
+            raise RequestError('set_scene: with the simulated user, a scene changes between tasks (when = "next_task")')
+        d.pending_scene = (scene, dropped)
+    elif when == "next_task":
+        raise RequestError('set_scene: "next_task" is for the simulated user; stop the arm and send when = "now"')
+    elif not d.ctl.stopped:
+        raise RequestError('set_scene: stop the arm first (the stop command), then send the scene with when = "now"')
+    else:
+        d.apply_scene(scene, dropped)
+    return {"scene": scene.name, "targets": list(scene.targets), "dropped": dropped, "when": when}
 
 
 def set_method(d: Daemon, method: str) -> None:

@@ -72,6 +72,8 @@ class Daemon:
         self.arm: Arm | None = None
         self.arm_state: ArmState | None = None
         self.input_connected = opts.input == "sim"
+        #: A scene sent with ``when = "next_task"`` (and the goals it dropped), applied at the next task.
+        self.pending_scene: tuple[Any, list[dict[str, str]]] | None = None
         self.planner_status = WorkerStatus.IDLE
         self.last_plan_ms = 0.0
         self.plans = 0
@@ -148,6 +150,25 @@ class Daemon:
             # it is back).
             self.event("fault", source="joystick", detail=f"{text}: the stop button is not available")
             commands.stop(self, "joystick_lost")
+
+    def apply_scene(self, scene: Any, dropped: list[dict[str, str]]) -> None:
+        """Run on ``scene`` from now on (``commands.set_scene``): belief, questions and plans start over on
+        its goals; a simulated arm is rebuilt with its objects (the real arm stays where it is)."""
+        self.opts.scene = scene
+        self.pending_scene = None
+        if self.arm is not None and not self.arm.realtime:
+            self.arm.close()
+            self.arm = self._arm_factory()
+            self.arm_state = self.arm.read()
+            self.ctl.use_arm(self.arm.kinematics)
+        if self.sim is not None:
+            self.sim.sim.scene = scene
+        had_question = self.ctl.question is not None
+        self.ctl.new_goals(scene.goals)
+        if had_question:
+            self.asker.cleared()
+        self.event("scene", name=scene.name, objects=[o.name for o in scene.objects], targets=list(scene.targets),
+                   dropped=dropped)
 
     def reconfigure(self, cfg: Config) -> None:
         """A person's profile from now on (``commands.set_profile``): the controller, the questions and

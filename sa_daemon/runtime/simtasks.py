@@ -78,6 +78,8 @@ class SimTasks:
         if d.opts.exit_when_done and d.opts.duration_s is None and len(self.done) >= len(self.sim.tasks):
             d.request_stop("all tasks done")
             return
+        if d.pending_scene is not None:  # a scene from perception, sent for this task
+            d.apply_scene(*d.pending_scene)
         d.reset_arm()
         had_question = d.ctl.question is not None
         d.set_mode(Mode.TRANSLATION)
