@@ -96,6 +96,18 @@ class BlendConfig(_Section):
 
     alpha: float = Field(0.5, ge=0, le=1, description="a_total = (1 - alpha) a_h + alpha a_r")
     predict_margin: float = Field(0.4, ge=0, le=1, description="blend: assist when p1 - p2 > margin")
+    yield_near_m: float = Field(
+        0.0, ge=0, le=0.5,
+        description="the robot stops assisting within this distance (m) of a grasp pose of the most likely object, "
+        "when that object holds yield_near_belief of the belief; 0 = never (the paper)",
+    )
+    yield_near_belief: float = Field(0.8, gt=0.5, le=1, description="the belief share the most likely object needs")
+    opposition_window_s: float = Field(
+        0.0, ge=0, le=10,
+        description="the robot yields while the user has opposed its assistance in opposition_share of the control "
+        "periods with input over this window (s); 0 = opposition only costs in the planner's reward (the paper)",
+    )
+    opposition_share: float = Field(0.8, gt=0, le=1, description="the share of opposed periods that makes the robot yield")
 
 
 class RewardConfig(_Section):

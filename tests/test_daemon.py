@@ -40,8 +40,8 @@ from sa_daemon.world.scene import load_scene
 SCENE1_TARGETS = load_scene("scene1").targets
 STATE_KEYS = {
     "v", "t", "mode", "user_twist", "robot_twist", "command_twist", "gripper_pose", "gripper_closed", "belief",
-    "action", "question", "planner", "safety", "safety_codes", "method", "assist", "stopped", "stop_tested", "arm",
-    "input", "task",
+    "action", "question", "planner", "safety", "safety_codes", "method", "assist", "stopped", "stop_tested",
+    "yielding", "arm", "input", "task",
 }
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,6 +107,8 @@ class Controller:
         self._mode = Mode.TRANSLATION
         self._axes = np.zeros(3)
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
+        self._opposition: deque[tuple[float, bool]] = deque()  # (t, opposed) of periods with input
+        self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick
         self._t_input = -math.inf
         self._input_seq = 0
@@ -377,6 +380,8 @@ class Controller:
         self._t_speed = -math.inf
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
+        self._opposition.clear()
+        self._yield = None
         self._safety.restart()
 
     # -- stop --------------------------------------------------------------------------------------------
@@ -427,6 +432,9 @@ class Controller:
         error = None
         try:
             cmd = self._model.command(action, self._belief.goals, self._belief.probs, state.pose, u, self._method)
+            self._yield = self._yield_reason(t, state.pose, cmd, fresh and bool(np.any(u)))
+            if self._yield is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
+                cmd = self._model.command(NO_ASSIST, self._belief.goals, self._belief.probs, state.pose, u, self._method)
         except (ValueError, FloatingPointError) as e:
             cmd, error = Command(NO_ASSIST, ZERO6.copy(), u, False), str(e)
         result = self._safety.filter(
@@ -435,6 +443,40 @@ class Controller:
         )
         self._last = Tick(cmd, result, fresh, error)
         return self._last
+
+    @property
+    def yielding(self) -> str | None:
+        """Why the robot is not assisting now although its plan would: ``"near_object"`` (within
+        ``blend.yield_near_m`` of the object the belief settles on: the person fine-tunes alone) or
+        ``"user_opposes"`` (the person has kept opposing the assistance over ``blend.opposition_window_s``:
+        they want a pose of their own); ``None`` otherwise."""
+        return self._yield
+
+    def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
+        """The paper's future work (section VI-E.4), both off by default: see :attr:`yielding`."""
+        b = self._cfg.blend
+        if b.opposition_window_s > 0.0:
+            if has_input:
+                self._opposition.append((t, bool(cmd.opposed)))
+            while self._opposition and self._opposition[0][0] < t - b.opposition_window_s:
+                self._opposition.popleft()
+            n = len(self._opposition)
+            span = self._opposition[-1][0] - self._opposition[0][0] if n else 0.0
+            if span >= 0.5 * b.opposition_window_s and sum(o for _, o in self._opposition) >= b.opposition_share * n:
+                return "user_opposes"
+        if b.yield_near_m > 0.0:
+            goals = self._belief.goals
+            by_object: dict[str, float] = {}
+            for target, p in goals.target_probabilities(self._belief.probs).items():
+                obj = target.split(":", 1)[0]
+                by_object[obj] = by_object.get(obj, 0.0) + p
+            obj, share = max(by_object.items(), key=lambda kv: kv[1])
+            if share >= b.yield_near_belief:
+                nearest = min(float(np.linalg.norm(p.position - pose.position))
+                              for g in goals.goals if g.object == obj for p in g.poses)
+                if nearest <= b.yield_near_m:
+                    return "near_object"
+        return None
 
     def _carried_action(self, t: float, pose: Pose) -> Action:
         """:meth:`current_action`, its goal index carried over to the belief's goal set when resampling

@@ -93,6 +93,7 @@ def state_message(v: View) -> dict[str, Any]:
         "safety_codes": [c.value for c in tick.safety.codes],
         "method": v.method,
         "assist": v.assist,
+        "yielding": v.yielding,
         "stopped": v.stopped,
         "stop_tested": v.stop_tested,
         "arm": {"backend": v.arm_name, "fault": st.fault if st else None},

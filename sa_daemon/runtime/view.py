@@ -89,6 +89,10 @@ class View:
         return self._d.ctl.stop_tested
 
     @property
+    def yielding(self) -> str | None:
+        return self._d.ctl.yielding
+
+    @property
     def profile(self) -> str | None:
         """The person's profile in force (its name), or ``None``."""
         p = self._d.opts.profile

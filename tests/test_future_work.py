@@ -1,0 +1,91 @@
+"""The paper's future work (section VI-E.4), as switches off by default (the paper's behaviour): the
+robot stops assisting near the object the belief settles on, and yields to a user who keeps opposing
+its assistance over a window (so a pose outside every list can be reached)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sa_daemon.arm.base import ArmState
+from sa_daemon.config import config_from_dict
+from sa_daemon.control.controller import Controller
+from sa_daemon.geometry import Pose
+from sa_daemon.model.actions import HO_ACTION, ActionKind
+from sa_daemon.world.scene import load_scene
+
+SCENE = load_scene("scene1")
+DT = 0.01
+
+
+def _ctl(**blend) -> Controller:
+    cfg = config_from_dict({"blend": blend}) if blend else config_from_dict({})
+    ctl = Controller(cfg, SCENE.goals, "ho", DT)
+    ctl.adopt_fixed()
+    return ctl
+
+
+def _run(ctl: Controller, pose: Pose, axes, seconds: float, t0: float = 0.0):
+    st = ArmState(pose, False, None, None)
+    t, tick = t0, None
+    while t < t0 + seconds:
+        ctl.on_input(axes, t)
+        tick = ctl.tick(st, t)
+        t += DT
+    return tick, t
+
+
+def _belief_on(ctl: Controller, target: str, share: float) -> None:
+    b = ctl._belief
+    mask = b.goals.target_mask(target)
+    p = np.where(mask, share / mask.sum(), (1 - share) / (~mask).sum())
+    ctl._belief = b._with(np.log(p))
+
+
+def test_near_the_settled_object_the_robot_stops_assisting_only_when_switched_on():
+    cup = SCENE.goal("cup:top").poses[0]
+    near = Pose(cup.position + np.array([0.0, 0.0, 0.03]), cup.quat_wxyz)
+    for yield_near_m, want in ((0.0, None), (0.05, "near_object")):
+        ctl = _ctl(yield_near_m=yield_near_m)
+        _belief_on(ctl, "cup:top", 0.9)  # the cup holds 0.9 (its two grasps share the rest too)
+        tick, _ = _run(ctl, near, [0.2, 0.0, 0.0], 0.05)
+        assert ctl.yielding == want
+        assert (not np.any(tick.command.robot_twist)) == (want is not None)
+        assert tick.command.action.kind is (ActionKind.NONE if want else ActionKind.HO)
+    far = Pose(cup.position + np.array([-0.2, 0.0, 0.2]), cup.quat_wxyz)
+    ctl = _ctl(yield_near_m=0.05)
+    _belief_on(ctl, "cup:top", 0.9)
+    _run(ctl, far, [0.2, 0.0, 0.0], 0.05)
+    assert ctl.yielding is None  # far from it: assisted
+    ctl = _ctl(yield_near_m=0.05)
+    _belief_on(ctl, "bowl:top", 0.6)  # near the cup, but the belief has not settled on it
+    _run(ctl, near, [0.2, 0.0, 0.0], 0.05)
+    assert ctl.yielding is None
+
+
+def test_a_user_who_keeps_opposing_the_assistance_is_followed_then_assisted_again():
+    start = SCENE.start
+    ctl = _ctl(opposition_window_s=1.0, opposition_share=0.8)
+    st = ArmState(start, False, None, None)
+    ctl.on_input([0.0, 0.0, 0.0], 0.0)
+    r = ctl.tick(st, 0.0).command
+    ho = ctl._model.robot_twist(HO_ACTION, ctl._belief.goals, ctl._belief.probs, start, np.zeros(6))
+    away = -np.sign(ho[:3]) * (np.abs(ho[:3]) > 0.01)  # push against HO on every axis it moves
+    tick, t = _run(ctl, start, away, 0.4, t0=DT)
+    assert ctl.yielding is None  # less than half the window: not yet
+    tick, t = _run(ctl, start, away, 0.8, t0=t)
+    assert ctl.yielding == "user_opposes" and not np.any(tick.command.robot_twist)
+    assert np.allclose(tick.command.total_twist[:3], away * ctl._cfg.input.linear_scale_mps)
+    tick, t = _run(ctl, start, -away, 1.5, t0=t)  # the user goes along with it again
+    assert ctl.yielding is None and np.any(tick.command.robot_twist)
+    assert r is not None
+    off = _ctl()
+    tick, _ = _run(off, start, away, 2.0)
+    assert off.yielding is None and np.any(tick.command.robot_twist)  # the paper: HO keeps assisting
+
+
+def test_the_switches_default_to_the_papers_behaviour():
+    b = config_from_dict({}).blend
+    assert b.yield_near_m == 0.0 and b.opposition_window_s == 0.0
+    with pytest.raises(Exception, match="yield_near_belief"):
+        config_from_dict({"blend": {"yield_near_belief": 0.3}})
