@@ -403,6 +403,7 @@ class JoystickConfig(_Section):
     button_no: str = Field("BTN_TOP", description="answer no")
     button_assist: str = Field("BTN_TOP2", description="assistance on/off")
     button_stop: str = Field("BTN_PINKIE", description="latched stop (released by resume)")
+    button_other: str = Field("BTN_BASE", description='answer "that object, another grasp" (asking.third_answer)')
     grab: bool = Field(False, description="exclusive access to the device")
     poll_s: float = Field(1.0, gt=0, description="how often a missing device is looked for (s)")
 
@@ -533,6 +534,9 @@ class AskingConfig(_Section):
     """What a person wants of the questions (their profile, ``docs/profiles.md``)."""
 
     max_per_task: int = Field(0, ge=0, le=100, description="questions per task at most (0 = as the planner decides)")
+    third_answer: bool = Field(
+        False, description='a third answer, "yes, that object, but another grasp" (the paper: yes or no only)'
+    )
     answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
         ("button", "command", "voice"),
         description="where answers are taken from: the joystick's buttons, the protocol (and the page), the voice",
@@ -592,6 +596,9 @@ class Config(_Section):
     def _check_method(self) -> Config:
         if self.method not in METHODS:
             raise ValueError(f"method: unknown method {self.method!r} (one of {', '.join(METHODS)})")
+        if self.asking.third_answer and self.planner.model != "watch":
+            raise ValueError("asking.third_answer: the planner plans the third answer with the watch model only "
+                             '(planner.model = "watch")')
         return self
 
 

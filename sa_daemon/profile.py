@@ -26,11 +26,12 @@ from .config import Config, ConfigError, config_from_dict
 #: The keys a profile may set, by section.
 PROFILE_KEYS: dict[str, frozenset[str]] = {
     "joystick": frozenset({"axes", "signs", "deadzone", "gains", "centre", "low", "high", "button_mode",
-                           "button_gripper", "button_yes", "button_no", "button_assist", "button_stop"}),
+                           "button_gripper", "button_yes", "button_no", "button_assist", "button_stop",
+                           "button_other"}),
     "input": frozenset({"filter_hz"}),
     "blend": frozenset({"alpha"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
-    "asking": frozenset({"max_per_task", "answer_sources"}),
+    "asking": frozenset({"max_per_task", "answer_sources", "third_answer"}),
 }
 #: The assistance level a profile may choose (the paper's 0.5 in the middle): enough of the person's own
 #: input always passes, and enough assistance to matter.

@@ -89,3 +89,68 @@ def test_the_switches_default_to_the_papers_behaviour():
     assert b.yield_near_m == 0.0 and b.opposition_window_s == 0.0
     with pytest.raises(Exception, match="yield_near_belief"):
         config_from_dict({"blend": {"yield_near_belief": 0.3}})
+
+
+# -- the third answer: "yes, that object, but another grasp" ---------------------------------------------------
+
+
+def test_the_other_grasp_answer_moves_the_asked_targets_probability_to_its_siblings_by_hand():
+    from sa_daemon.model.model import SharedAutonomyModel
+
+    cfg = config_from_dict({"asking": {"third_answer": True}})
+    m = SharedAutonomyModel(cfg)
+    b = m.initial_belief(SCENE.goals)
+    tp = {"cup:top": 0.4, "cup:side": 0.2, "chips can:side": 0.3, "bowl:top": 0.1}
+    p = np.zeros(len(b.goals))
+    for t, share in tp.items():
+        mask = b.goals.target_mask(t)
+        p[mask] = share / mask.sum()
+    b = b._with(np.log(p))
+    after = m.update_answer(b, "cup:top", "other").target_probabilities()
+    # cup:top's 0.4 goes to cup:side (the cup's only other grasp); the others keep theirs
+    assert after["cup:top"] == pytest.approx(0.0, abs=1e-6)
+    assert after["cup:side"] == pytest.approx(0.6, abs=1e-6)
+    assert after["chips can:side"] == pytest.approx(0.3, abs=1e-6) and after["bowl:top"] == pytest.approx(0.1, abs=1e-6)
+    with pytest.raises(ValueError, match="no other grasp type"):
+        m.update_answer(b, "bowl:top", "other")  # the bowl has one grasp type only
+
+
+def test_the_third_answer_is_refused_unless_switched_on_and_the_simulated_user_gives_it_truthfully():
+    from sa_daemon.sim.user import SimulatedUser
+
+    ctl = Controller(config_from_dict({}), SCENE.goals, "policy", DT)
+    ctl.ask("cup:top", 0.0)
+    with pytest.raises(ValueError, match="third answer is off"):
+        ctl.on_answer("other", 0.5)
+    on = Controller(config_from_dict({"asking": {"third_answer": True}}), SCENE.goals, "policy", DT)
+    on.ask("cup:top", 0.0)
+    on.on_answer("other", 0.5)
+    assert on.belief.target_probabilities()["cup:top"] < 1e-6
+    cfg = config_from_dict({})
+    user = SimulatedUser("cup:side", SCENE.goal("cup:side").poses[0], cfg.sim_user, cfg.input,
+                         np.random.default_rng(0), DT)
+    assert user.answer("cup:top", third=True) == "other" and user.answer("cup:top") is False
+    assert user.answer("bowl:top", third=True) is False and user.answer("cup:side", third=True) is True
+    with pytest.raises(Exception, match="asking.third_answer"):
+        config_from_dict({"asking": {"third_answer": True}, "planner": {"model": "commit"}})
+
+
+def test_a_daemon_with_the_third_answer_takes_it_through_the_protocol(tmp_path):
+    from helpers import DaemonProc
+
+    d = DaemonProc(tmp_path / "d", "--method", "policy", "--duration", "600", "--no-speech",
+                   config="[asking]\nthird_answer = true\n[sim_user]\nanswer_delay_s = 60.0\n"
+                          "[planner]\nmax_questions = 5\n[reward]\nquestion_time_s = 0.5\n")
+    try:
+        d.wait_ready()
+        assert d.request({"cmd": "status"})["answers"] == ["yes", "no", "other"]
+        _, q = d.collector.event("question", timeout_s=90)
+        r = d.request({"cmd": "answer", "value": "other"})
+        if q["goal"].split(":")[0] == "cup":  # an object with two grasp types
+            assert r["ok"], r
+            _, a = d.collector.event("answer", timeout_s=10)
+            assert a["value"] == "other" and a["goal"] == q["goal"]
+        else:
+            assert not r["ok"] and "no other grasp type" in r["error"]
+    finally:
+        d.close()

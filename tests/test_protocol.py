@@ -94,7 +94,7 @@ def test_nesting_up_to_the_limit_is_accepted():
         (b'{"cmd": "status", "verbose": true}', "unexpected field.*verbose"),
         (b'{"cmd": "stop", "value": "yes"}', "unexpected field.*value"),
         (b'{"cmd": "answer", "value": "yes", "method": "ho"}', "unexpected field.*method"),
-        (b'{"cmd": "answer"}', '"value" must be "yes" or "no"'),
+        (b'{"cmd": "answer"}', '"value" must be "yes", "no" or "other"'),
         (b'{"cmd": "answer", "value": "YES"}', '"value" must be'),
         (b'{"cmd": "answer", "value": true}', '"value" must be'),
         (b'{"cmd": "answer", "value": 1}', '"value" must be'),

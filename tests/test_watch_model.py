@@ -120,6 +120,40 @@ def test_a_node_budget_stops_before_the_watched_motions():
 # -- the search against a plain recursion ---------------------------------------------------------------
 
 
+def _outcomes(cfg, goals, question_target: str, b: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The answers to a question about ``question_target`` at belief ``b``, computed one goal at a time:
+    ``(P(answer | g) for every g, the tracker's belief after it)``. Yes and no by Bayes with the
+    two-answer likelihood; with ``asking.third_answer`` also "that object, another grasp", where the
+    asked target's probability goes to its object's other targets."""
+    p = cfg.intent.answer_p_correct
+    G = len(goals)
+    tgt = [goals.goals[g].target for g in range(G)]
+    obj = [goals.goals[g].object for g in range(G)]
+    qobj = question_target.split(":", 1)[0]
+    in_t = np.array([t == question_target for t in tgt])
+    lb = np.where(in_t, p, 1 - p)
+    yes_b, no_b = b * lb / (b @ lb), b * (1 - lb) / (b @ (1 - lb))
+    if not cfg.asking.third_answer:
+        return [(lb, yes_b), (1 - lb, no_b)]
+    sib = np.array([o == qobj and not t for o, t in zip(obj, in_t)])
+    if not sib.any():
+        return [(lb, yes_b), (1 - lb, no_b)]
+    correct = ["yes" if in_t[g] else ("other" if sib[g] else "no") for g in range(G)]
+    P = {a: np.array([p if correct[g] == a else (1 - p) / 2 for g in range(G)]) for a in ("yes", "no", "other")}
+    other_b = b.copy()
+    m_asked = b[in_t].sum()
+    sib_targets = sorted({tgt[g] for g in range(G) if sib[g]})
+    m_sib = b[sib].sum()
+    for g in range(G):
+        if sib[g]:
+            if m_sib > 0:
+                other_b[g] = b[g] * (1 + m_asked / m_sib)
+            else:
+                other_b[g] = b[g] + m_asked / len(sib_targets) / sum(t == tgt[g] for t in tgt)
+    other_b[in_t] = 0.0
+    return [(P["yes"], yes_b), (P["no"], no_b), (P["other"], other_b)]
+
+
 def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     """Every root action's value by a plain recursion over the tree of ``planner/watch.py``'s module doc:
     one node at a time, no batching, no deduplication, one rollout per start pose."""
@@ -141,11 +175,9 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
             for q in range(len(s.questions)):
                 if q in asked:
                     continue
-                L = s.L_yes[q]
-                py = float(b @ L)
-                vy = decide(R, b * L / py, asked | {q}, steps - n_q, depth + 1)
-                vn = decide(R, b * (1 - L) / (1 - py), asked | {q}, steps - n_q, depth + 1)
-                v = r_q + n_q * R.stay[0] + L * vy + (1 - L) * vn
+                v = r_q + n_q * R.stay[0]
+                for like, after in _outcomes(cfg, snap.goals, s.questions[q].target, b):
+                    v = v + like * decide(R, after, asked | {q}, steps - n_q, depth + 1)
                 if b @ v > best_e:
                     best_e, best_v = float(b @ v), v
         return best_v
@@ -153,11 +185,10 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
     out = {a: float(b0 @ R.value[0, :, i, s.n]) for i, a in enumerate(s.moves)}
     for q, a in enumerate(s.questions):
-        L = s.L_yes[q]
-        py = float(b0 @ L)
-        vy = decide(R, b0 * L / py, frozenset({q}), s.n - n_q, 1)
-        vn = decide(R, b0 * (1 - L) / (1 - py), frozenset({q}), s.n - n_q, 1)
-        out[a] = float(b0 @ (r_q + n_q * R.stay[0] + L * vy + (1 - L) * vn))
+        v = r_q + n_q * R.stay[0]
+        for like, after in _outcomes(cfg, snap.goals, a.target, b0):
+            v = v + like * decide(R, after, frozenset({q}), s.n - n_q, 1)
+        out[a] = float(b0 @ v)
     watched = {}
     p = b0[s.branches] / b0[s.branches].sum()
     for w in s.watched:
@@ -172,13 +203,15 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     return out, watched
 
 
+@pytest.mark.parametrize("third", [False, True])
 @pytest.mark.parametrize("seed", range(12))
-def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed):
+def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, third):
     rng = np.random.default_rng(seed)
     cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
                watch_moves=int(rng.integers(0, 3)))
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
-    cfg = cfg.model_copy(update={"reward": reward})
+    asking = cfg.asking.model_copy(update={"third_answer": third})
+    cfg = cfg.model_copy(update={"reward": reward, "asking": asking})
     model = SharedAutonomyModel(cfg)
     goals = model.initial_belief(SCENE.goals).goals
     probs = rng.dirichlet(np.full(len(goals), 0.7)) + 1e-6

@@ -41,7 +41,7 @@ DAEMON_TOML = COMMIT_MODEL_TOML + "[sim_user]\nanswer_delay_s = 60.0\n[speech]\n
 def test_page_messages_are_the_protocols_requests_limited_to_what_the_page_offers():
     assert parse_page_message('{"cmd": "answer", "value": "yes"}', 4096).args == {"value": "yes"}
     assert parse_page_message(b'{"cmd": "stop"}', 4096).cmd == "stop"
-    for bad, why in (('{"cmd": "answer", "value": "maybe"}', '"value" must be "yes" or "no"'),
+    for bad, why in (('{"cmd": "answer", "value": "maybe"}', '"value" must be "yes", "no" or "other"'),
                      ('{"cmd": "launch"}', "unknown command"), ("[1, 2]", "must be a JSON object"),
                      ('{"cmd": "stop", "x": 1}', "unexpected field"), ("{" * 10 + "}" * 10, "nested deeper"),
                      ('{"cmd": "stop", "pad": "' + "a" * 5000 + '"}', "too large"), ("NaN", "not JSON")):

@@ -289,13 +289,19 @@ class Controller:
         self._asked.add(target)
         return self._question
 
-    def on_answer(self, yes: bool, t: float) -> Question:
-        """Apply a yes/no answer to the pending question (final, ``docs/model.md``) and return it; the plan
-        is dropped so that the next one uses the new belief. :class:`NoQuestion` if none is pending."""
+    def on_answer(self, answer: bool | str, t: float) -> Question:
+        """Apply an answer to the pending question (final, ``docs/model.md``) and return it: yes/no
+        (``True``/``False`` or ``"yes"``/``"no"``) or ``"other"`` (that object, another grasp; only with
+        ``asking.third_answer``, and only where the object has another grasp type: ``ValueError``
+        otherwise, nothing changed). The plan is dropped so that the next one uses the new belief.
+        :class:`NoQuestion` if none is pending."""
         q = self._question
         if q is None:
             raise NoQuestion("no question is pending")
-        self._belief = self._model.update_answer(self._belief, q.target, bool(yes))
+        if answer == "other" and not self._cfg.asking.third_answer:
+            raise ValueError("the third answer is off (asking.third_answer)")
+        self._belief = self._model.update_answer(self._belief, q.target, answer if answer == "other" else
+                                                 answer in (True, "yes"))
         self._question = None
         self.drop_plan()
         return q

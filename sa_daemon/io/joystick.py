@@ -34,6 +34,7 @@ class Button(str, Enum):
     NO = "no"
     ASSIST = "assist"
     STOP = "stop"
+    OTHER = "other"
 
 
 @dataclass(frozen=True)

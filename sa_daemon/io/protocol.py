@@ -90,8 +90,8 @@ def parse_request(raw: bytes, max_bytes: int = 65536, max_depth: int = 8) -> Req
         raise RequestError(f"{cmd}: unexpected field(s) {', '.join(repr(e[:40]) for e in extra[:5])}")
     if cmd == "answer":
         value = args.get("value")
-        if value not in ("yes", "no"):
-            raise RequestError('answer: "value" must be "yes" or "no"')
+        if value not in ("yes", "no", "other"):
+            raise RequestError('answer: "value" must be "yes", "no" or "other" (that object, another grasp)')
     if cmd == "set_profile":
         name = args.get("profile")
         if not isinstance(name, str) or not PROFILE_NAME.match(name) or name.endswith(".toml"):

@@ -165,6 +165,33 @@ class Belief:
         log_p = self._normalised(self.log_p + np.log(like), cfg.cap)
         return self._with(log_p, target) if yes else self._with(log_p, ruled_out=frozenset({target}))
 
+    def siblings(self, target: str) -> list[str]:
+        """The other targets (grasp types) of ``target``'s object."""
+        obj = target.split(":", 1)[0]
+        return [t for t in self.goals.targets if t != target and t.split(":", 1)[0] == obj]
+
+    def after_other_grasp(self, target: str, cfg: IntentConfig) -> Belief:
+        """The third answer to "is ``target`` your goal?": "yes, that object, but another grasp" (section
+        VII; ``asking.third_answer``). ``target`` is ruled out and its probability goes to its object's
+        other targets, in proportion to theirs (equally where they have none); every other object keeps
+        its probability. ``ValueError`` if the object has no other target."""
+        sibs = self.siblings(target)
+        if target not in self.goals.targets or not sibs:
+            raise ValueError(f"{target!r}: its object has no other grasp type to prefer")
+        p = np.exp(self.log_p - log_sum_exp(self.log_p))
+        tp = self.goals.target_probabilities(p)
+        asked = self.goals.target_mask(target)
+        total = sum(tp[s] for s in sibs)
+        for s in sibs:
+            m = self.goals.target_mask(s)
+            if total > 0.0:
+                p[m] *= 1.0 + tp[target] / total
+            else:
+                p[m] += tp[target] / len(sibs) / m.sum()
+        p[asked] = 0.0
+        log_p = self._normalised(np.log(np.maximum(p, 1e-300)), cfg.cap)
+        return self._with(log_p, ruled_out=frozenset({target}))
+
     # -- resampling and redistribution (section III-G) -------------------------------------------------
 
     def copy_allocation(self) -> dict[str, int]:

@@ -54,9 +54,12 @@ class SharedAutonomyModel:
         """Joystick observation at one input sample, then resampling if it is due."""
         return belief.after_input(pose, user_twist, self.cfg.intent).resampled(pose, self.cfg.intent)
 
-    def update_answer(self, belief: Belief, target: str, yes: bool) -> Belief:
-        """Answer observation ("yes"/"no" to the question about ``target``)."""
-        return belief.after_answer(target, yes, self.cfg.intent)
+    def update_answer(self, belief: Belief, target: str, answer: bool | str) -> Belief:
+        """Answer observation to the question about ``target``: ``"yes"``/``True``, ``"no"``/``False``, or
+        ``"other"`` (that object, another grasp: ``asking.third_answer``)."""
+        if answer == "other":
+            return belief.after_other_grasp(target, self.cfg.intent)
+        return belief.after_answer(target, answer in (True, "yes"), self.cfg.intent)
 
     # -- actions -------------------------------------------------------------------------------------------
 

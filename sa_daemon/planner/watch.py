@@ -58,11 +58,15 @@ def _answer_keys(start: np.ndarray, asked: np.ndarray, yes: np.ndarray) -> np.nd
     """One key per node from its start pose and its answer sets: a 1-D ``int64`` (start, asked bits,
     yes bits) when they fit in 62 bits, else rows of bytes. Equal keys, equal beliefs."""
     nq = asked.shape[1]
-    if 2 * nq + int(start.max(initial=0)).bit_length() <= 62:
+    planes = [asked, yes] if yes.dtype == bool else [asked, yes == 1, yes == 2]  # third answer: 2 = "other"
+    if len(planes) * nq + int(start.max(initial=0)).bit_length() <= 62:
         weights = np.left_shift(np.int64(1), np.arange(nq, dtype=np.int64))
-        return (start.astype(np.int64) << (2 * nq)) | ((asked @ weights) << nq) | (yes @ weights)
+        key = start.astype(np.int64)
+        for plane in planes:
+            key = (key << nq) | (plane.astype(np.int64) @ weights)
+        return key
     return np.concatenate((start[:, None].astype(np.int64).view(np.uint8).reshape(len(start), -1),
-                           np.packbits(asked, axis=1), np.packbits(yes, axis=1)), axis=1)
+                           *(np.packbits(plane, axis=1) for plane in planes)), axis=1)
 
 
 class WatchSearch:
@@ -84,7 +88,22 @@ class WatchSearch:
         self.max_q = pc.max_questions if snap.questions_left is None else min(pc.max_questions, snap.questions_left)
         p = cfg.intent.answer_p_correct
         qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
-        self.L_yes = np.where(qi[:, None] == goals.target_index[None, :], p, 1.0 - p).reshape(len(qi), len(goals))
+        in_t = (qi[:, None] == goals.target_index[None, :]).reshape(len(qi), len(goals))
+        self.L_yes = np.where(in_t, p, 1.0 - p)
+        self.third = cfg.asking.third_answer
+        if self.third:  # "yes, that object, but another grasp" (asking.third_answer; docs/model.md)
+            qobj = np.array([q.target.split(":", 1)[0] for q in self.questions])
+            gobj = np.array([g.object for g in goals.goals])
+            self.asked_mask = in_t
+            self.sib = (qobj[:, None] == gobj[None, :]) & ~in_t  # the asked object's other grasps
+            has_sib = self.sib.any(axis=1)[:, None]
+            wrong = np.where(has_sib, (1.0 - p) / 2.0, 1.0 - p)  # a wrong answer, one of the others
+            self.P_yes = np.where(in_t, p, wrong)
+            self.P_other = np.where(has_sib, np.where(self.sib, p, wrong), 0.0)
+            self.P_no = 1.0 - self.P_yes - self.P_other
+            counts = np.bincount(goals.target_index, minlength=len(goals.targets))[goals.target_index]
+            n_sib = np.array([len(set(goals.target_index[row])) for row in self.sib])
+            self.eq_share = np.where(self.sib, 1.0 / np.maximum(n_sib[:, None] * counts[None, :], 1), 0.0)
         cands = model.candidate_goals(goals, self.b0, snap.pose)
         self.branches = np.array([g for g in cands if self.b0[g] > 0], dtype=int)
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
@@ -157,6 +176,8 @@ class WatchSearch:
         node, q = np.nonzero(avail)
         py = np.einsum("kg,kg->k", B[node], L[q])
         eye = np.eye(nq, dtype=bool)
+        if self.third:
+            return self._question_vectors_3(R, c, B, asked, yes.astype(np.int8), node, q, py, n, nq, steps, depth)
         kid_B = np.concatenate((B[node] * L[q] / py[:, None], B[node] * (1.0 - L[q]) / (1.0 - py)[:, None]))
         kid_c = np.concatenate((c[node], c[node]))
         kid_a = np.concatenate((asked[node] | eye[q], asked[node] | eye[q]))
@@ -169,6 +190,41 @@ class WatchSearch:
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
         wait = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
         Vq[node, q] = wait + L[q] * v[:k] + (1.0 - L[q]) * v[k:]
+        return Vq
+
+    def other_grasp(self, B: FloatArray, q: np.ndarray) -> FloatArray:
+        """The tracker's belief after "that object, another grasp" to question ``q`` (per row of ``B``):
+        the asked target's probability goes to the object's other targets, in proportion to theirs (equally
+        where they have none); other objects keep theirs (``Belief.after_other_grasp``)."""
+        A, S = self.asked_mask[q], self.sib[q]
+        m_asked = np.einsum("kg,kg->k", B, A)
+        m_sib = np.einsum("kg,kg->k", B, S)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scaled = np.where(S, B * (1.0 + m_asked / m_sib)[:, None], B)
+        equal = B + m_asked[:, None] * self.eq_share[q]
+        return np.where(A, 0.0, np.where((m_sib > 0.0)[:, None], scaled, equal))
+
+    def _question_vectors_3(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray,
+                            node: np.ndarray, q: np.ndarray, py: FloatArray, n: int, nq: int, steps: int,
+                            depth: int) -> FloatArray:
+        """:meth:`question_vectors` with the third answer: three children per question, yes and no by the
+        tracker's Bayes update (as for two answers), "other" by :meth:`other_grasp`; each weighted for goal
+        ``g`` by how likely a person with goal ``g`` gives it (``P_yes``, ``P_no``, ``P_other``)."""
+        L = self.L_yes
+        eye = np.eye(nq, dtype=bool)
+        kid_B = np.concatenate((B[node] * L[q] / py[:, None], B[node] * (1.0 - L[q]) / (1.0 - py)[:, None],
+                                self.other_grasp(B[node], q)))
+        kid_c = np.concatenate((c[node], c[node], c[node]))
+        kid_a = np.concatenate((asked[node] | eye[q],) * 3)
+        kid_y = np.concatenate((np.where(eye[q], 1, yes[node]), yes[node], np.where(eye[q], 2, yes[node]))).astype(np.int8)
+        _, first, inverse = np.unique(_answer_keys(kid_c, kid_a, kid_y), axis=0, return_index=True,
+                                      return_inverse=True)
+        v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
+        v = v[inverse.ravel()]
+        k = len(node)
+        Vq = np.full((n, nq, B.shape[1]), -np.inf)
+        wait = self.cfg.reward.question + self.n_q * R.stay[c[node]]
+        Vq[node, q] = wait + self.P_yes[q] * v[:k] + self.P_no[q] * v[k:2 * k] + self.P_other[q] * v[2 * k:]
         return Vq
 
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:

@@ -71,18 +71,22 @@ class Asker:
         if self.voice is not None:
             self.voice.mute()
 
-    def answer(self, yes: bool, source: str, **detail: Any) -> None:
-        """Apply a yes/no answer to the pending question; :class:`RequestError` if there is none.
-        ``detail`` (a voice answer's ``confidence``) goes into the ``answer`` event."""
+    def answer(self, answer: bool | str, source: str, **detail: Any) -> None:
+        """Apply an answer to the pending question (``True``/``"yes"``, ``False``/``"no"``, ``"other"``);
+        :class:`RequestError` with the reason if there is none or it cannot be taken. ``detail`` (a voice
+        answer's ``confidence``) goes into the ``answer`` event."""
         now = time.monotonic()
         if source in ("button", "command", "voice") and source not in self._cfg.asking.answer_sources:
             raise RequestError(f"answers by {source} are off (asking.answer_sources)")
+        value = answer if answer == "other" else ("yes" if answer in (True, "yes") else "no")
         try:
-            q = self._ctl.on_answer(yes, now)
+            q = self._ctl.on_answer(value, now)
         except NoQuestion as e:
             raise RequestError(str(e)) from None
+        except ValueError as e:  # the third answer off, or the object has one grasp type only
+            raise RequestError(str(e)) from None
         self.cleared()
-        self._event("answer", goal=q.target, value="yes" if yes else "no", source=source,
+        self._event("answer", goal=q.target, value=value, source=source,
                     after_s=round(now - q.asked_at, 3), **detail)
 
     def expire(self, now: float) -> None:

@@ -26,7 +26,7 @@ def handle(d: Daemon, req: Request) -> dict[str, Any]:
     if req.cmd == "status":
         return messages.status(d.view)
     if req.cmd == "answer":
-        d.asker.answer(req.args["value"] == "yes", source="command")
+        d.asker.answer(req.args["value"], source="command")
         return {}
     if req.cmd == "stop":
         stop(d, "command")
@@ -54,9 +54,9 @@ def on_button(d: Daemon, button: Any) -> None:
         d.event("mode", mode=ctl.toggle_mode().value)
     elif name == "gripper":
         d.set_gripper(not ctl.gripper_closed)
-    elif name in ("yes", "no"):
+    elif name in ("yes", "no", "other"):
         try:
-            d.asker.answer(name == "yes", source="button")
+            d.asker.answer(name, source="button")
         except RequestError:
             pass  # no question pending: the press means nothing
     elif name == "assist":

@@ -31,6 +31,7 @@ def status(v: View) -> dict[str, Any]:
         "stop_tested": v.stop_tested,
         "profile": v.profile,
         "profiles": v.profiles(),
+        "answers": ["yes", "no", "other"] if v.third_answer else ["yes", "no"],
         "assist": v.assist,
         "uptime_s": round(v.t, 3),
         "scene": v.scene,

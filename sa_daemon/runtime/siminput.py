@@ -65,9 +65,9 @@ class SimInput:
         inp = self.user.act(pose, listening=listening, blocked=blocked)
         return SimSample(np.asarray(inp.axes, dtype=float), inp.mode, bool(inp.close))
 
-    def answer(self, target: str) -> bool:
+    def answer(self, target: str) -> bool | str:
         assert self.user is not None
-        return self.user.answer(target)
+        return self.user.answer(target, self.cfg.asking.third_answer)
 
     def answers_by(self, qid: int, asked_at: float, t: float) -> bool:
         """Whether the user has answered question ``qid``, asked at ``asked_at``, by ``t`` (s)."""

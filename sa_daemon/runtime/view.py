@@ -89,6 +89,10 @@ class View:
         return self._d.ctl.stop_tested
 
     @property
+    def third_answer(self) -> bool:
+        return self._d.cfg.asking.third_answer
+
+    @property
     def yielding(self) -> str | None:
         return self._d.ctl.yielding
 

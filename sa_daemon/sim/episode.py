@@ -209,7 +209,7 @@ def run_trial(
         answered = False
         q = ctl.question
         if q is not None and user.answers_by(q.qid, q.asked_at, t):
-            ctl.on_answer(user.answer(q.target), t)
+            ctl.on_answer(user.answer(q.target, cfg.asking.third_answer), t)
             answered = True  # re-plan now, with the answer
         if step % plan_every == 0 or answered:
             snap = ctl.snapshot(state.pose, budget_s=None, node_budget=cfg.eval.node_budget)

@@ -234,9 +234,13 @@ class SimulatedUser:
         if rate > 0.0 and self._switch_left <= 0.0 and self.rng.random() < rate * self.dt:
             self._switch(Mode.ROTATION if self.mode is Mode.TRANSLATION else Mode.TRANSLATION)
 
-    def answer(self, target: str) -> bool:
-        """Answer "is ``target`` your goal?" (truthful unless the error rate strikes)."""
+    def answer(self, target: str, third: bool = False) -> bool | str:
+        """Answer "is ``target`` your goal?" (truthful unless the error rate strikes): ``True``/``False``,
+        or with ``third`` (``asking.third_answer``) ``"other"`` when ``target`` is the right object with the
+        wrong grasp type."""
         truth = target == self.task
         if self.cfg.answer_error_rate > 0.0 and self.rng.random() < self.cfg.answer_error_rate:
             return not truth
+        if third and not truth and target.split(":", 1)[0] == str(self.task).split(":", 1)[0]:
+            return "other"
         return truth

@@ -54,7 +54,7 @@ function onState(msg) {
 function render(s) {
   const q = s.question;
   $("question").textContent = q ? q : "No question";
-  $("yes").disabled = $("no").disabled = !q;
+  $("yes").disabled = $("no").disabled = $("other").disabled = !q;
   $("action").textContent = s.action.kind + (s.action.goal ? ` ${s.action.goal}` : "");
   $("mode").textContent = s.mode;
   $("assist").textContent = (s.assist ? "on" : "off") + `, ${s.method}`;
@@ -156,6 +156,7 @@ function drawTable(s) {
 function onReply(msg) {
   window.saReplies.push(msg);
   if (msg.type === "reply" && msg.cmd === "status" && msg.ok) {
+    $("other").hidden = !(msg.answers || []).includes("other");
     const sel = $("profile");
     sel.replaceChildren(...(msg.profiles || []).map((n) => { const o = document.createElement("option"); o.value = o.textContent = n; return o; }));
     if (msg.profile) sel.value = msg.profile;
@@ -185,6 +186,7 @@ function init() {
   $("resume").onclick = () => send({cmd: "resume"});
   $("yes").onclick = () => send({cmd: "answer", value: "yes"});
   $("no").onclick = () => send({cmd: "answer", value: "no"});
+  $("other").onclick = () => send({cmd: "answer", value: "other"});
   $("method").onchange = (e) => send({cmd: "set_method", method: e.target.value});
   $("switch").onclick = () => { if ($("profile").value) send({cmd: "set_profile", profile: $("profile").value}); };
   document.addEventListener("keydown", (e) => {
@@ -194,6 +196,7 @@ function init() {
     else if (key === "r") $("resume").click();
     else if (key === "y" && !$("yes").disabled) $("yes").click();
     else if (key === "n" && !$("no").disabled) $("no").click();
+    else if (key === "o" && !$("other").hidden && !$("other").disabled) $("other").click();
   });
   connect();
   // The view is only as good as its last state: say so when the daemon goes quiet.
