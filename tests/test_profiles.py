@@ -294,3 +294,10 @@ def test_set_profile_switches_between_tasks_and_is_refused_while_the_arm_moves(t
             w.close()
     finally:
         d.close()
+
+
+def test_calibrate_without_the_device_says_so_and_writes_nothing(tmp_path):
+    r = subprocess.run([*CLI, "calibrate", "--device", "/dev/input/event99", "--profile", str(tmp_path / "p.toml")],
+                       capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2 and "no input device '/dev/input/event99'" in r.stderr
+    assert not (tmp_path / "p.toml").exists()

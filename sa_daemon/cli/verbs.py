@@ -178,8 +178,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     path = resolve(args.profile, cfg.profiles.dir)
-    device = next((evdev.InputDevice(p) for p in evdev.list_devices()
-                   if args.device in (p, evdev.InputDevice(p).name)), None)
+    device = None
+    for p in evdev.list_devices():
+        dev = evdev.InputDevice(p)
+        if args.device in (p, dev.name):
+            device = dev
+            break
+        dev.close()
     if device is None:
         raise ConfigError(f"calibrate --device: no input device {args.device!r} (evdev.list_devices)")
     print(f"calibrating {device.name} ({device.path}), axes {', '.join(cfg.joystick.axes)}")
