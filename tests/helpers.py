@@ -46,6 +46,18 @@ SUMMARY_KEYS = (
     "opposing_pct", "correct_prediction_rate", "questions",
 )
 
+def until(pred, timeout_s: float = 30.0, what: str = "condition", poll_s: float = 0.02):
+    """Poll ``pred`` until it returns something true, and return that; ``AssertionError`` naming ``what``
+    after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while True:
+        v = pred()
+        if v:
+            return v
+        assert time.monotonic() < end, f"{what}: not met within {timeout_s} s"
+        time.sleep(poll_s)
+
+
 def free_port() -> int:
     """A free loopback TCP port (bind to port 0, read it back, release it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

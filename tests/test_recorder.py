@@ -7,7 +7,7 @@ import shutil
 import time
 from pathlib import Path
 
-from helpers import fill_disk, small_disk
+from helpers import fill_disk, small_disk, until
 from mcap.reader import make_reader
 
 from sa_daemon.io.recorder import Recorder, read_recording
@@ -32,17 +32,6 @@ def _write(path: Path, n_states: int, flush_s: float = 1.0) -> Recorder:
             rec.add("/event", {"t": i * 0.01, "type": "question", "goal": "cup:top"})
     rec.add("/event", {"t": n_states * 0.01, "type": "stopped", "code": 0})
     return rec
-
-
-def _until(pred, timeout_s: float = 20.0, what: str = "condition"):
-    end = time.monotonic() + timeout_s
-    while True:
-        v = pred()
-        if v:
-            return v
-        if time.monotonic() > end:
-            raise AssertionError(f"{what} not met within {timeout_s} s")
-        time.sleep(0.02)
 
 
 def test_state_and_event_round_trip(tmp_path):
@@ -86,7 +75,7 @@ def test_a_copy_taken_while_recording_is_readable_up_to_the_flush(tmp_path):
     try:
         for i in range(100):
             rec.add("/state", _state(i))
-        _until(lambda: rec.written == 100, what="writer caught up")
+        until(lambda: rec.written == 100, 20.0, "writer caught up")
 
         def copy_has_all() -> list:
             snap = tmp_path / "snap.mcap"
@@ -94,7 +83,7 @@ def test_a_copy_taken_while_recording_is_readable_up_to_the_flush(tmp_path):
             states = [m for topic, _, m in read_recording(snap) if topic == "/state"]
             return states if len(states) == 100 else []
 
-        states = _until(copy_has_all, what="flushed data on disk")
+        states = until(copy_has_all, 20.0, "flushed data on disk")
         assert [s["i"] for s in states] == list(range(100))
         for i in range(100, 150):  # still recording, later messages follow
             rec.add("/state", _state(i))
@@ -109,7 +98,7 @@ def test_truncated_files_are_read_up_to_the_last_complete_record(tmp_path):
     for i in range(400):
         rec.add("/state", _state(i))
         if i % 50 == 49:
-            _until(lambda n=i + 1: rec.written == n)
+            until(lambda n=i + 1: rec.written == n, 20.0)
             time.sleep(0.06)  # let a flush close the chunk: several chunks in the file
     rec.close()
     data = path.read_bytes()
@@ -169,7 +158,7 @@ def test_a_bad_message_is_dropped_and_recording_goes_on(tmp_path):
         rec.add("/nope", {"t": 0})
         rec.add("/state", {"t": 0.5, "x": object()})
         rec.add("/state", _state(1))
-        _until(lambda: rec.written + rec.dropped == 4, what="all four handled")
+        until(lambda: rec.written + rec.dropped == 4, 20.0, "all four handled")
     finally:
         rec.close()
     assert rec.written == 2 and rec.dropped == 2
@@ -189,7 +178,7 @@ def test_a_full_disk_stops_the_recording_reports_once_and_keeps_what_was_flushed
         try:
             for i in range(100):
                 rec.add("/state", _state(i))
-            _until(lambda: rec.flushed == 100, what="the first 100 on disk")
+            until(lambda: rec.flushed == 100, 20.0, "the first 100 on disk")
             fill_disk(disk)
             i = 100
             while not errors:  # the next chunk that needs a new page of the full disk fails

@@ -9,6 +9,7 @@ tests skip, saying so; CI installs it (``.ci/run``).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import shutil
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import aiohttp
 import pytest
-from helpers import CLI, COMMIT_MODEL_TOML, DaemonProc, free_port
+from helpers import CLI, COMMIT_MODEL_TOML, DaemonProc, free_port, until
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -126,11 +127,10 @@ class WebProc:
         self.log.close()
 
 
-@pytest.fixture(scope="module")
-def live(tmp_path_factory):
-    """A daemon (simulated user, kinematic arm, early questions) and its page."""
-    root = tmp_path_factory.mktemp("web")
-    d = DaemonProc(root / "daemon", "--method", "policy", "--duration", "600", "--no-speech", config=DAEMON_TOML)
+@contextlib.contextmanager
+def fresh_page(root: Path, method: str = "ho", config: str | None = None):
+    """A fresh daemon (by default HO assistance: no questions, the user drives from the start) and its page."""
+    d = DaemonProc(root / "daemon", "--method", method, "--duration", "600", "--no-speech", config=config)
     w = WebProc(root / "web", d)
     try:
         d.wait_ready()
@@ -139,6 +139,13 @@ def live(tmp_path_factory):
     finally:
         w.close()
         d.close()
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """A daemon (simulated user, kinematic arm, early questions) and its page."""
+    with fresh_page(tmp_path_factory.mktemp("web"), "policy", DAEMON_TOML) as (d, w):
+        yield d, w
 
 
 async def _ws_messages(url: str, sends: list[str], until, timeout_s: float = 20.0, **kw) -> list[dict]:
@@ -323,38 +330,21 @@ def browser():
         drv.quit()
 
 
-def _wait(pred, timeout_s: float = 30.0, what: str = "condition"):
-    end = time.monotonic() + timeout_s
-    while True:
-        v = pred()
-        if v:
-            return v
-        assert time.monotonic() < end, f"{what}: not met in {timeout_s} s"
-        time.sleep(0.05)
-
-
 BARS = "return [...document.querySelectorAll('#bars li')].map(li => [li.dataset.goal, +li.dataset.p])"
 
 
 def test_in_chromium_the_belief_bars_follow_the_user_as_they_drive(browser, tmp_path):
     """A fresh daemon with HO assistance (no questions): the user drives to the cup from the start."""
-    d = DaemonProc(tmp_path / "daemon", "--method", "ho", "--duration", "600", "--no-speech")
-    w = WebProc(tmp_path / "web", d)
-    try:
-        d.wait_ready()
-        w.wait_listening()
+    with fresh_page(tmp_path) as (_, w):
         browser.get(w.url + "/")
-        _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
+        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
         early = dict(browser.execute_script(BARS))
         assert set(early) == {"cup:top", "cup:side", "chips can:side", "bowl:top"}
-        late = _wait(lambda: (b := dict(browser.execute_script(BARS)))["cup:top"] + b["cup:side"]
-                     > early["cup:top"] + early["cup:side"] + 0.2 and b, 30, "the cup's bars rising")
+        late = until(lambda: (b := dict(browser.execute_script(BARS)))["cup:top"] + b["cup:side"]
+                 > early["cup:top"] + early["cup:side"] + 0.2 and b, 30, "the cup's bars rising")
         assert late["bowl:top"] < early["bowl:top"]
         order = browser.execute_script("return [...document.querySelectorAll('#bars li')].map(li => li.dataset.goal)")
         assert order[:2] == sorted(late, key=late.get, reverse=True)[:2]  # most likely first
-    finally:
-        w.close()
-        d.close()
 
 
 def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_path):
@@ -364,11 +354,11 @@ def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_
     c = d.collector
     assert d.request({"cmd": "resume"})["ok"]
     browser.get(w.url + "/")
-    _wait(lambda: browser.execute_script("return window.saRendered") > 10, what="states drawn")
+    until(lambda: browser.execute_script("return window.saRendered") > 10, what="states drawn")
 
     # The daemon asks (its simulated user waits 60 s to answer); the person taps Yes on the page.
     i = len(c)
-    _wait(lambda: browser.find_element(By.ID, "question").text != "No question", 60, "a question on the page")
+    until(lambda: browser.find_element(By.ID, "question").text != "No question", 60, "a question on the page")
     shown = browser.find_element(By.ID, "question").text
     q = c.latest_state()["question"]
     assert q and shown == q and browser.find_element(By.ID, "yes").is_enabled()
@@ -379,7 +369,7 @@ def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_
     browser.find_element(By.ID, "yes").click()
     _, ans = c.event("answer", timeout_s=10, start=i)
     assert ans["value"] == "yes" and ans["source"] == "command"
-    _wait(lambda: browser.find_element(By.ID, "question").text != shown, 10, "the question cleared")
+    until(lambda: browser.find_element(By.ID, "question").text != shown, 10, "the question cleared")
 
     # Stop: latched, and the command is zero from the first control tick after the latch.
     i = len(c)
@@ -389,7 +379,7 @@ def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_
     seen_s = next(at for at, m in c.received(i) if m.get("type") == "stop") - t_click
     _, s = c.state(lambda s: s["t"] > ev["t"] + PERIOD_S, start=ie)
     assert s["stopped"] and s["command_twist"] == [0.0] * 6
-    _wait(lambda: "STOPPED" in browser.find_element(By.ID, "stopped").text, 10, "the page shows the stop")
+    until(lambda: "STOPPED" in browser.find_element(By.ID, "stopped").text, 10, "the page shows the stop")
     lat = sorted(browser.execute_script("return window.saLatency"))
     median_ms, p95_ms = 1e3 * lat[len(lat) // 2], 1e3 * lat[int(0.95 * (len(lat) - 1))]
     print(f"page: state -> pixels median {median_ms:.1f} ms, p95 {p95_ms:.1f} ms over {len(lat)} states; "
@@ -405,7 +395,7 @@ def test_in_chromium_the_keyboard_works_too(live, browser):
     d, w = live
     c = d.collector
     browser.get(w.url + "/")
-    _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
+    until(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
     i = len(c)
     browser.find_element(By.TAG_NAME, "body").send_keys("s")
     c.event("stop", timeout_s=10, start=i, source="command")
@@ -425,25 +415,18 @@ def test_in_chromium_a_bad_token_gets_nothing_and_the_right_one_the_live_page(li
         assert browser.title != "sa-daemon" and "STOP" not in browser.page_source  # an empty 401
         browser.get(w.url + "/?token=" + token)
         assert browser.title == "sa-daemon"
-        _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states over the WebSocket")
+        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states over the WebSocket")
         browser.get(w.url + "/")  # the cookie alone, from now on
-        _wait(lambda: browser.execute_script("return window.saRendered") > 3, what="states with the cookie")
+        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states with the cookie")
     finally:
         w.close()
 
 
 def test_in_chromium_the_page_says_when_the_daemon_goes_quiet(browser, tmp_path):
-    d = DaemonProc(tmp_path / "daemon", "--method", "ho", "--duration", "600", "--no-speech")
-    w = WebProc(tmp_path / "web", d)
-    try:
-        d.wait_ready()
-        w.wait_listening()
-        from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.by import By
 
+    with fresh_page(tmp_path) as (d, w):
         browser.get(w.url + "/")
-        _wait(lambda: browser.find_element(By.ID, "link").text == "live", 30, "live")
+        until(lambda: browser.find_element(By.ID, "link").text == "live", 30, "live")
         d.close()  # the daemon ends: no more states
-        _wait(lambda: "stale" in browser.find_element(By.ID, "link").text, 10, "the view marked stale")
-    finally:
-        w.close()
-        d.close()
+        until(lambda: "stale" in browser.find_element(By.ID, "link").text, 10, "the view marked stale")

@@ -44,25 +44,35 @@ def reaches(kin: ArmKinematics, pose: Pose, q_start: FloatArray, margin_rad: flo
     return bool(np.all(q >= kin.lower + margin_rad) and np.all(q <= kin.upper - margin_rad))
 
 
+def _restrict(scene: Scene, kin: ArmKinematics, margin_rad: float) -> tuple[list[Goal], list[Goal]]:
+    """``(goals with their reachable poses only, goals with none)`` of ``scene``."""
+    from .kinematics import start_configuration
+
+    q_start = start_configuration(kin, scene.start)
+    kept_goals: list[Goal] = []
+    dropped: list[Goal] = []
+    for g in scene.goals:
+        kept = tuple(p for p in g.poses if reaches(kin, p, q_start, margin_rad))
+        if not kept:
+            dropped.append(g)
+            continue
+        if len(kept) < len(g.poses):
+            log.info("%s: %d of %d grasp poses reachable by the arm", g.target, len(kept), len(g.poses))
+        kept_goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
+    return kept_goals, dropped
+
+
 def reachable_scene(scene: Scene, kin: ArmKinematics, margin_rad: float) -> Scene:
     """``scene`` with each goal's poses restricted to those :func:`reaches` accepts.
 
     Raises ``ValueError`` naming the goal if one keeps no pose: that task cannot be done on this arm.
     """
-    from .kinematics import start_configuration
-
-    q_start = start_configuration(kin, scene.start)
-    goals: list[Goal] = []
-    for g in scene.goals:
-        kept = tuple(p for p in g.poses if reaches(kin, p, q_start, margin_rad))
-        if not kept:
-            raise ValueError(
-                f"scene {scene.name!r}: no grasp pose of {g.target} is reachable by the xArm-6 within its joint "
-                f"bounds less {margin_rad} rad (safety.joint_margin_rad)"
-            )
-        if len(kept) < len(g.poses):
-            log.info("%s: %d of %d grasp poses reachable by the arm", g.target, len(kept), len(g.poses))
-        goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
+    goals, dropped = _restrict(scene, kin, margin_rad)
+    if dropped:
+        raise ValueError(
+            f"scene {scene.name!r}: no grasp pose of {dropped[0].target} is reachable by the xArm-6 within its joint "
+            f"bounds less {margin_rad} rad (safety.joint_margin_rad)"
+        )
     return replace(scene, goals=tuple(goals))
 
 
@@ -70,18 +80,9 @@ def reachable_goals(scene: Scene, kin: ArmKinematics, margin_rad: float) -> tupl
     """``scene`` with each goal's poses restricted to the reachable ones, and goals with none dropped:
     ``(scene, [{"target": ..., "reason": ...}])`` (a live scene from a camera: some of its grasps may be
     out of reach; the rest can still be driven to). ``ValueError`` if no goal is left."""
-    from .kinematics import start_configuration
-
-    q_start = start_configuration(kin, scene.start)
-    goals: list[Goal] = []
-    dropped: list[dict[str, str]] = []
-    for g in scene.goals:
-        kept = tuple(p for p in g.poses if reaches(kin, p, q_start, margin_rad))
-        if kept:
-            goals.append(g if len(kept) == len(g.poses) else replace(g, poses=kept))
-        else:
-            dropped.append({"target": g.target, "reason": f"none of its {len(g.poses)} grasp poses is reachable by "
-                            f"the xArm-6 within its joint bounds less {margin_rad} rad"})
+    goals, dropped = _restrict(scene, kin, margin_rad)
     if not goals:
         raise ValueError(f"scene {scene.name!r}: no goal is reachable by the xArm-6")
-    return replace(scene, goals=tuple(goals)), dropped
+    reasons = [{"target": g.target, "reason": f"none of its {len(g.poses)} grasp poses is reachable by the xArm-6 "
+                f"within its joint bounds less {margin_rad} rad"} for g in dropped]
+    return replace(scene, goals=tuple(goals)), reasons

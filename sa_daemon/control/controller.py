@@ -109,7 +109,7 @@ class Controller:
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition: deque[tuple[float, bool]] = deque()  # (t, opposed) of periods with input
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
-        self._axes_out = np.zeros(3)  # the axes after it, as of the last tick
+        self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
         self._input_seq = 0
         self._speed = np.zeros(2)  # smoothed user speed (m/s, rad/s)
@@ -198,7 +198,8 @@ class Controller:
     @property
     def user_twist(self) -> FloatArray:
         """The user's twist (m/s, rad/s) of the last sample in the current mode."""
-        return axes_to_twist(self._axes_out, self._mode, self._cfg.input)
+        axes = self._axes_out if self._smooth.tau_s > 0.0 else self._axes  # after the tremor filter, if any
+        return axes_to_twist(axes, self._mode, self._cfg.input)
 
     @property
     def user_speed(self) -> tuple[float, float]:
@@ -219,7 +220,6 @@ class Controller:
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             return False
         self._axes = np.clip(a, -1.0, 1.0)
-        self._axes_out = self._axes.copy() if self._smooth.tau_s == 0.0 else self._axes_out
         self._t_input = t
         self._input_seq += 1
         return True
@@ -419,7 +419,7 @@ class Controller:
         self._cfg = cfg
         self._model = SharedAutonomyModel(cfg)
         self._smooth = LowPass(cfg.input.filter_hz)
-        self._axes_out = self._axes.copy()
+        self._axes_out = np.zeros(3)  # a new filter starts at rest, as at start-up
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""

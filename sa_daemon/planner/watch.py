@@ -169,27 +169,37 @@ class WatchSearch:
     def question_vectors(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray,
                          avail: np.ndarray, steps: int, depth: int) -> FloatArray:
         """``ask_q`` of the module doc for every node and available question, ``(n, Q, G)`` (``-inf`` where
-        not available). The children are deduplicated: a belief depends on the set of answers, not
-        their order, so each (start, asked, yes) is decided once."""
+        not available). Each answer is a child: yes and no by the tracker's Bayes update, and with the third
+        answer "other" by :meth:`other_grasp`; each weighted for goal ``g`` by how likely a person with goal
+        ``g`` gives it. The children are deduplicated: a belief depends on the set of answers, not their
+        order, so each (start, asked, answers) is decided once."""
         n, nq = avail.shape
         L = self.L_yes  # (Q, G)
         node, q = np.nonzero(avail)
-        py = np.einsum("kg,kg->k", B[node], L[q])
-        eye = np.eye(nq, dtype=bool)
-        if self.third:
-            return self._question_vectors_3(R, c, B, asked, yes.astype(np.int8), node, q, py, n, nq, steps, depth)
-        kid_B = np.concatenate((B[node] * L[q] / py[:, None], B[node] * (1.0 - L[q]) / (1.0 - py)[:, None]))
-        kid_c = np.concatenate((c[node], c[node]))
-        kid_a = np.concatenate((asked[node] | eye[q], asked[node] | eye[q]))
-        kid_y = np.concatenate((yes[node] | eye[q], yes[node]))
+        Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
+        py = np.einsum("kg,kg->k", Bn, L[q])
+        yes_B, no_B = Bn * L[q] / py[:, None], Bn * (1.0 - L[q]) / (1.0 - py)[:, None]
+        if self.third:  # answers per question as 0 (none or no), 1 (yes), 2 (other)
+            y = y.astype(np.int8)
+            outcomes = [(yes_B, np.where(first_q, 1, y).astype(np.int8), self.P_yes[q]), (no_B, y, self.P_no[q]),
+                        (self.other_grasp(Bn, q), np.where(first_q, 2, y).astype(np.int8), self.P_other[q])]
+        else:
+            outcomes = [(yes_B, y | first_q, L[q]), (no_B, y, 1.0 - L[q])]
+        m = len(outcomes)
+        kid_B = np.concatenate([o[0] for o in outcomes])
+        kid_c = np.tile(c[node], m)
+        kid_a = np.tile(asked[node] | first_q, (m, 1))
+        kid_y = np.concatenate([o[1] for o in outcomes])
         _, first, inverse = np.unique(_answer_keys(kid_c, kid_a, kid_y), axis=0, return_index=True,
                                       return_inverse=True)
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        wait = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
-        Vq[node, q] = wait + L[q] * v[:k] + (1.0 - L[q]) * v[k:]
+        total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
+        for i, (_, _, like) in enumerate(outcomes):
+            total = total + like * v[i * k:(i + 1) * k]
+        Vq[node, q] = total
         return Vq
 
     def other_grasp(self, B: FloatArray, q: np.ndarray) -> FloatArray:
@@ -203,29 +213,6 @@ class WatchSearch:
             scaled = np.where(S, B * (1.0 + m_asked / m_sib)[:, None], B)
         equal = B + m_asked[:, None] * self.eq_share[q]
         return np.where(A, 0.0, np.where((m_sib > 0.0)[:, None], scaled, equal))
-
-    def _question_vectors_3(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray,
-                            node: np.ndarray, q: np.ndarray, py: FloatArray, n: int, nq: int, steps: int,
-                            depth: int) -> FloatArray:
-        """:meth:`question_vectors` with the third answer: three children per question, yes and no by the
-        tracker's Bayes update (as for two answers), "other" by :meth:`other_grasp`; each weighted for goal
-        ``g`` by how likely a person with goal ``g`` gives it (``P_yes``, ``P_no``, ``P_other``)."""
-        L = self.L_yes
-        eye = np.eye(nq, dtype=bool)
-        kid_B = np.concatenate((B[node] * L[q] / py[:, None], B[node] * (1.0 - L[q]) / (1.0 - py)[:, None],
-                                self.other_grasp(B[node], q)))
-        kid_c = np.concatenate((c[node], c[node], c[node]))
-        kid_a = np.concatenate((asked[node] | eye[q],) * 3)
-        kid_y = np.concatenate((np.where(eye[q], 1, yes[node]), yes[node], np.where(eye[q], 2, yes[node]))).astype(np.int8)
-        _, first, inverse = np.unique(_answer_keys(kid_c, kid_a, kid_y), axis=0, return_index=True,
-                                      return_inverse=True)
-        v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
-        v = v[inverse.ravel()]
-        k = len(node)
-        Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        wait = self.cfg.reward.question + self.n_q * R.stay[c[node]]
-        Vq[node, q] = wait + self.P_yes[q] * v[:k] + self.P_no[q] * v[k:2 * k] + self.P_other[q] * v[2 * k:]
-        return Vq
 
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
         """Value of every question at the root (then the tracker's choices), by the root belief."""

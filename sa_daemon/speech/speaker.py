@@ -178,10 +178,7 @@ class Speaker:
     def _run(self) -> None:
         try:
             engine = self._factory()
-            engine.setProperty("rate", self.cfg.rate_wpm)
-            engine.setProperty("volume", self.cfg.volume)
-            if self.cfg.voice:
-                engine.setProperty("voice", self.cfg.voice)  # an espeak-ng voice name, e.g. en-gb
+            self._set_voice(engine)
             self._available = True
         except Exception as e:  # noqa: BLE001 - no engine: say so once, go on without speech
             self._error = f"speech unavailable: {type(e).__name__}: {e}"
@@ -194,10 +191,7 @@ class Speaker:
                 return
             if self._reconfigured:
                 self._reconfigured = False
-                engine.setProperty("rate", self.cfg.rate_wpm)
-                engine.setProperty("volume", self.cfg.volume)
-                if self.cfg.voice:
-                    engine.setProperty("voice", self.cfg.voice)
+                self._set_voice(engine)
             self.busy_since = time.monotonic()
             try:
                 spoken = self._speak(engine, text)
@@ -208,6 +202,13 @@ class Speaker:
                 self.on_done(spoken)
             except Exception:
                 log.exception("speech callback failed")
+
+    def _set_voice(self, engine: Any) -> None:
+        """The engine speaks at ``cfg``'s rate and volume, with its voice (an espeak-ng name, e.g. en-gb)."""
+        engine.setProperty("rate", self.cfg.rate_wpm)
+        engine.setProperty("volume", self.cfg.volume)
+        if self.cfg.voice:
+            engine.setProperty("voice", self.cfg.voice)
 
     def _wav_path(self, text: str) -> tuple[Path, bool]:
         self._count += 1

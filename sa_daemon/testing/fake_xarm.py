@@ -348,29 +348,17 @@ class FakeXArmAPI:
         """Clock time (s) since which the velocity in force has been zero: when the last moving command's
         ``duration`` ran out (the model's instant, not when anyone looked), when a zero command landed,
         or when the arm stopped itself; ``None`` while it moves."""
-        with self._lock:
-            self._advance()
-            since = self._stopped_since
-        self._flush()
-        return since
+        return self._now(lambda: self._stopped_since)
 
     @property
     def speed(self) -> FloatArray:
         """The velocity in force now: ``[mm/s x3, rad/s x3]``, base frame (zero once expired)."""
-        with self._lock:
-            self._advance()
-            speed = self._speed.copy()
-        self._flush()
-        return speed
+        return self._now(lambda: self._speed.copy())
 
     @property
     def position_mm(self) -> FloatArray:
         """The TCP position now (mm, base frame)."""
-        with self._lock:
-            self._advance()
-            p = self._pos_mm.copy()
-        self._flush()
-        return p
+        return self._now(lambda: self._pos_mm.copy())
 
     gripper_position = _locked("_gripper_pos")  # mm
     gripper_enabled = _locked("_gripper_enabled")
@@ -388,11 +376,7 @@ class FakeXArmAPI:
 
     @property
     def state(self) -> int:
-        with self._lock:
-            self._advance()
-            code = self._state_code()
-        self._flush()
-        return code
+        return self._now(self._state_code)
 
     collision_sensitivity = _locked("_sensitivity")
 
@@ -405,11 +389,7 @@ class FakeXArmAPI:
     @property
     def error_code(self) -> int:
         """The controller's error now (the motion is advanced first: reaching the fence raises 35)."""
-        with self._lock:
-            self._advance()
-            code = self._error
-        self._flush()
-        return code
+        return self._now(lambda: self._error)
 
     warn_code = _locked("_warn")
 
@@ -828,6 +808,15 @@ class FakeXArmAPI:
         self._stop(at=at)
         if self._connected:
             self._pending.append(self._err_payload())
+
+    def _now(self, read: Callable[[], Any]) -> Any:
+        """``read()`` of the controller as it is now: the motion advanced to the clock first (which may
+        raise an error whose callback then fires, outside the lock)."""
+        with self._lock:
+            self._advance()
+            value = read()
+        self._flush()
+        return value
 
     def _flush(self) -> None:
         """Fire the error callbacks queued under the lock, outside it."""

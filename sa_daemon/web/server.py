@@ -155,7 +155,7 @@ class WebServer:
         self.pages.add(page)
         sender = asyncio.create_task(self._send_loop(page))
         try:
-            await ws.send_json({"type": "hello", "version": protocol.PROTOCOL_VERSION, "scene": self.scene})
+            await ws.send_str(self._hello())
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
                     await self._on_page_message(ws, msg.data)
@@ -220,10 +220,14 @@ class WebServer:
         reply = await self.link.command(protocol.Request("scene", {}))
         if reply.get("ok"):
             self.scene = {k: v for k, v in reply.items() if k != "ok"}
-            hello = json.dumps({"type": "hello", "version": protocol.PROTOCOL_VERSION, "scene": self.scene})
+            hello = self._hello()
             for p in self.pages:
                 p.events.append({"_json": hello})
                 p.wake.set()
+
+    def _hello(self) -> str:
+        """The ``hello`` a page gets on connect and when the scene changes."""
+        return json.dumps({"type": "hello", "version": protocol.PROTOCOL_VERSION, "scene": self.scene})
 
     async def _start(self, app: web.Application) -> None:
         self._tasks.append(asyncio.create_task(self.link.receive(self._on_daemon)))
