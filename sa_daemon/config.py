@@ -530,6 +530,17 @@ class RecordConfig(_Section):
     flush_s: float = Field(1.0, gt=0, le=10, description="data reaches the disk at least this often (s)")
 
 
+class FoxgloveConfig(_Section):
+    """The live view for Foxglove (``docs/foxglove.md``): a WebSocket server on 127.0.0.1 only."""
+
+    enabled: bool = Field(False, description="serve the live view (run --foxglove)")
+    port: int = Field(8765, ge=0, le=65535, description="its TCP port on 127.0.0.1 (0: any free port)")
+    scene_period_s: float = Field(1.0, gt=0, le=10, description="the table, objects and grasp poses are re-sent "
+                                  "at least this often (s), so a viewer that connects late sees them")
+    belief_step: float = Field(0.01, gt=0, le=1, description="... and whenever a target's probability moved by "
+                               "more than this since they were last drawn")
+
+
 class AskingConfig(_Section):
     """What a person wants of the questions (their profile, ``docs/profiles.md``)."""
 
@@ -588,6 +599,7 @@ class Config(_Section):
     voice: VoiceConfig = VoiceConfig()
     zmq: ZmqConfig = ZmqConfig()
     record: RecordConfig = RecordConfig()
+    foxglove: FoxgloveConfig = FoxgloveConfig()
     web: WebConfig = WebConfig()
     asking: AskingConfig = AskingConfig()
     profiles: ProfilesConfig = ProfilesConfig()

@@ -6,8 +6,9 @@ the control loop's rate and period error, overruns (periods > 1.5 x nominal), in
 daemon and of its planner worker. With ``--subscribers N --stalled-subscribers M`` a separate process
 holds N subscribers that read everything and M that never read (:mod:`.subscribers`); their figures
 (messages received, state rate, longest gap, messages a stalled one held) join the daemon's, with the
-daemon's ``pub_dropped`` (sends its PUB socket refused). :func:`run_daemon` and :func:`loop_figures`
-also serve ``bench soak``.
+daemon's ``pub_dropped`` (sends its PUB socket refused). With ``--foxglove`` the live view is on and one
+Foxglove viewer in another process subscribes to all of it (:mod:`.viewer`; its figures join too).
+:func:`run_daemon` and :func:`loop_figures` also serve ``bench soak``.
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ class BenchRun:
     duration_s: float
     rss: list[RssSample] = field(default_factory=list)
     subscribers: dict[str, Any] = field(default_factory=dict)
+    viewer: dict[str, Any] | None = None  # the Foxglove viewer's figures, with the live view on
 
 
 def run_daemon(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscribers: int = 0,
@@ -63,6 +65,7 @@ def run_daemon(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscr
 
     from ..runtime.rate import new_event_loop
     from .subscribers import SubscriberSwarm
+    from .viewer import FoxgloveViewer
 
     daemon = build_daemon(cfg, launch)
     run = BenchRun(daemon, 0.0)
@@ -76,12 +79,27 @@ def run_daemon(cfg: Config, launch: Launch, subscribers: int = 0, stalled_subscr
             run.rss.append(RssSample(round(daemon.now(), 3), rss_mb(), rss_mb(pid) if pid else 0.0, pid))
             await asyncio.sleep(sample_every_s)
 
+    async def view() -> None:
+        """With the live view on: one Foxglove viewer subscribed to everything, once the server is up."""
+        while daemon.live is None:
+            await asyncio.sleep(0.05)
+        viewer = FoxgloveViewer(daemon.live.url)
+        await asyncio.get_running_loop().run_in_executor(None, viewer.start)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            run.viewer = viewer.stop()
+
     async def main() -> int:
         s = asyncio.create_task(sample())
+        v = asyncio.create_task(view()) if cfg.foxglove.enabled else None
         try:
             return await daemon.run()
         finally:
             s.cancel()
+            if v is not None:
+                v.cancel()
+                await asyncio.gather(v, return_exceptions=True)
 
     if swarm is not None:
         swarm.start()
@@ -129,6 +147,7 @@ def loop_figures(run: BenchRun) -> dict[str, Any]:
         "state_messages_published": publish.stats.ticks if publish is not None else 0,
         "pub_dropped": daemon.server.dropped if daemon.server is not None else 0,
         "subscribers": run.subscribers,
+        "foxglove": run.viewer,
         "loops": figs["loops"],
     }
 
@@ -155,6 +174,7 @@ def format_loop(f: dict[str, Any]) -> str:
         ("tasks done / succeeded", f"{f['tasks_done']} / {f['tasks_succeeded']}", ""),
         ("states published / PUB sends refused", f"{f['state_messages_published']} / {f['pub_dropped']}", ""),
         *subscriber_rows(f["subscribers"]),
+        *viewer_rows(f.get("foxglove")),
     ]
     w = max(len(r[0]) for r in rows)
     head = f"bench loop: {f['arm']} arm, {f['method']}, {f['duration_s']:.1f} s"
@@ -173,4 +193,18 @@ def subscriber_rows(sub: dict[str, Any]) -> list[tuple[str, str, str]]:
         ("reader state rate min", f"{sub['reader_state_hz_min']:.2f} Hz", ""),
         ("reader state gap max", f"{sub['reader_state_gap_ms_max']:.1f} ms", ""),
         ("stalled: messages held", " ".join(str(n) for n in sub["stalled_messages_held"]) or "-", ""),
+    ]
+
+
+def viewer_rows(v: dict[str, Any] | None) -> list[tuple[str, str, str]]:
+    """Table rows of the Foxglove viewer's figures (none with the live view off)."""
+    if v is None:
+        return []
+    if "error" in v:
+        return [("foxglove viewer", v["error"], "")]
+    msgs, size = v["messages"], v["bytes"]
+    return [
+        ("foxglove messages /scene /belief /log", " / ".join(str(msgs.get(t, 0)) for t in ("/scene", "/belief", "/log")), ""),
+        ("foxglove kB received", f"{sum(size.values()) / 1e3:.0f} kB", ""),
+        ("foxglove belief gap max", f"{v['belief_gap_ms_max']:.1f} ms", ""),
     ]

@@ -11,13 +11,14 @@ number a reading subscriber received, show how many it lost.
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
 import zmq
+
+from .load import LoadProcess
 
 #: Receive high-water mark of a stalled subscriber (messages).
 STALLED_RCVHWM = 1
@@ -110,7 +111,7 @@ def _swarm_main(endpoint: str, n_reading: int, n_stalled: int, ready: Any, stop:
         ctx.term()
 
 
-class SubscriberSwarm:
+class SubscriberSwarm(LoadProcess):
     """``n_reading`` reading and ``n_stalled`` never-reading subscribers of ``endpoint`` in a spawned
     process. :meth:`start` returns once every socket is connecting; :meth:`stop` returns the figures:
     messages and ``state`` messages per reading subscriber (min/max), their lowest state rate (Hz) and
@@ -122,34 +123,4 @@ class SubscriberSwarm:
             raise ValueError(f"subscribers need a fixed PUB endpoint, not {endpoint!r}")
         if n_reading < 0 or n_stalled < 0:
             raise ValueError("subscriber counts must be >= 0")
-        ctx = mp.get_context("spawn")
-        self._ready, self._stop = ctx.Event(), ctx.Event()
-        self._recv, self._send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(
-            target=_swarm_main, args=(endpoint, n_reading, n_stalled, self._ready, self._stop, self._send),
-            name="sa-bench-subscribers", daemon=True,
-        )
-
-    def start(self, timeout_s: float = 30.0) -> None:
-        """Spawn the process and wait (up to ``timeout_s``) until its sockets exist."""
-        self._proc.start()
-        self._send.close()  # the child's copy is the only writer now: its death reads as EOF
-        if not self._ready.wait(timeout_s):
-            self._proc.kill()
-            raise TimeoutError(f"subscriber process not ready within {timeout_s} s")
-
-    def stop(self, timeout_s: float = 30.0) -> dict[str, Any]:
-        """Stop reading, drain the stalled sockets, and return the figures (``{"error": ...}`` if the
-        process died or did not answer within ``timeout_s``)."""
-        self._stop.set()
-        figs: dict[str, Any] | None = None
-        try:
-            if self._recv.poll(timeout_s):
-                figs = self._recv.recv()
-        except EOFError:
-            pass
-        self._proc.join(5.0)
-        if self._proc.is_alive():
-            self._proc.kill()
-            self._proc.join()
-        return figs if figs is not None else {"error": f"subscriber process gave no figures (exit {self._proc.exitcode})"}
+        super().__init__(_swarm_main, (endpoint, n_reading, n_stalled), "sa-bench-subscribers")

@@ -35,15 +35,19 @@ _FLAG_KEYS = {
     "cmd": "zmq.cmd",
     "record": "record.path",
     "speech_wav": "speech.wav_dir",
+    "foxglove_port": "foxglove.port",
 }
 
 
 def run_config(args: argparse.Namespace) -> Config:
     """The config file (``--config``) with ``run``'s flags over it."""
     cfg = load_config(args.config)
-    updates: dict[str, Any] = {key: getattr(args, flag) for flag, key in _FLAG_KEYS.items() if getattr(args, flag)}
+    updates: dict[str, Any] = {key: getattr(args, flag) for flag, key in _FLAG_KEYS.items()
+                              if getattr(args, flag) is not None}
     if args.no_speech:
         updates["speech.enabled"] = False
+    if args.foxglove:
+        updates["foxglove.enabled"] = True
     return override(cfg, updates) if updates else cfg
 
 
@@ -291,6 +295,9 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pub", help="PUB endpoint (default: config zmq.pub)")
     p.add_argument("--cmd", help="command endpoint (default: config zmq.cmd)")
     p.add_argument("--record", help="MCAP file to record to ({time} = timestamp)")
+    p.add_argument("--foxglove", action="store_true", help="serve the live view to Foxglove on 127.0.0.1 "
+                   "(docs/foxglove.md; config foxglove.enabled)")
+    p.add_argument("--foxglove-port", type=int, help="its port (default: config foxglove.port, 8765)")
     p.add_argument("--speech-wav", help="also write every spoken question as a WAV file in this folder")
     p.add_argument("--no-speech", action="store_true", help="publish questions without speaking them")
     p.add_argument("--seed", type=int, default=0, help="simulated user's random seed")

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +36,7 @@ from ..planner.snapshot import PlanResult, Snapshot
 from ..world.goalset import GoalSet
 from .lowpass import LowPass
 from .safety import SafetyPipeline, SafetyResult
+from .yielding import OppositionWindow, near_object, user_opposes
 
 ZERO6 = np.zeros(6)
 
@@ -107,7 +107,7 @@ class Controller:
         self._mode = Mode.TRANSLATION
         self._axes = np.zeros(3)
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
-        self._opposition: deque[tuple[float, bool]] = deque()  # (t, opposed) of periods with input
+        self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
@@ -420,6 +420,8 @@ class Controller:
         self._model = SharedAutonomyModel(cfg)
         self._smooth = LowPass(cfg.input.filter_hz)
         self._axes_out = np.zeros(3)  # a new filter starts at rest, as at start-up
+        if cfg.blend.opposition_window_s != self._opposition.window_s:
+            self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""
@@ -463,25 +465,11 @@ class Controller:
         b = self._cfg.blend
         if b.opposition_window_s > 0.0:
             if has_input:
-                self._opposition.append((t, bool(cmd.opposed)))
-            while self._opposition and self._opposition[0][0] < t - b.opposition_window_s:
-                self._opposition.popleft()
-            n = len(self._opposition)
-            span = self._opposition[-1][0] - self._opposition[0][0] if n else 0.0
-            if span >= 0.5 * b.opposition_window_s and sum(o for _, o in self._opposition) >= b.opposition_share * n:
-                return "user_opposes"
+                self._opposition.add(t, bool(cmd.opposed))
+            if reason := user_opposes(self._opposition, t, b.opposition_share):
+                return reason
         if b.yield_near_m > 0.0:
-            goals = self._belief.goals
-            by_object: dict[str, float] = {}
-            for target, p in goals.target_probabilities(self._belief.probs).items():
-                obj = target.split(":", 1)[0]
-                by_object[obj] = by_object.get(obj, 0.0) + p
-            obj, share = max(by_object.items(), key=lambda kv: kv[1])
-            if share >= b.yield_near_belief:
-                nearest = min(float(np.linalg.norm(p.position - pose.position))
-                              for g in goals.goals if g.object == obj for p in g.poses)
-                if nearest <= b.yield_near_m:
-                    return "near_object"
+            return near_object(self._belief.goals, self._belief.probs, pose, b.yield_near_m, b.yield_near_belief)
         return None
 
     def _carried_action(self, t: float, pose: Pose) -> Action:

@@ -1,7 +1,10 @@
 """MCAP recording of the daemon's state (control rate) and events, readable by Foxglove.
 
-Messages are JSON with a JSON-Schema per channel (``/state``, ``/event``), so Foxglove's plot panel
-can plot any field. Encoding and disk writes happen in one writer thread fed by a bounded queue, never
+``/state`` and ``/event`` are JSON with a JSON-Schema per channel, so Foxglove's plot panel can plot
+any field; more JSON topics are named with their schemas at construction (the live view's
+``/belief``), and a Foxglove message (``foxglove.messages``: the live view's ``/scene``, ``/log``) is
+written protobuf-encoded with the schema the SDK gives it, so a recording shows what the live view
+showed (``docs/foxglove.md``). Encoding and disk writes happen in one writer thread fed by a bounded queue, never
 on the event loop; the writer flushes a finished chunk at least every ``flush_s`` seconds, so a crash
 (even SIGKILL) loses at most about that much. :func:`read_recording` reads a finished file, and also
 one cut short by a crash, up to its last complete chunk.
@@ -70,7 +73,8 @@ class Recorder:
     """
 
     def __init__(self, path: str | Path, flush_s: float = 1.0, max_queue: int = 10000,
-                 on_error: Callable[[str], None] | None = None) -> None:
+                 on_error: Callable[[str], None] | None = None,
+                 json_topics: dict[str, dict[str, Any]] | None = None) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.flush_s = flush_s
@@ -85,18 +89,20 @@ class Recorder:
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="sa-daemon")
         ids = {}
-        for topic, schema in (("/state", STATE_SCHEMA), ("/event", EVENT_SCHEMA)):
+        for topic, schema in {"/state": STATE_SCHEMA, "/event": EVENT_SCHEMA, **(json_topics or {})}.items():
             sid = self._writer.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             ids[topic] = self._writer.register_channel(topic, "json", sid)
         self._channels = ids
+        self._typed: dict[str, int] = {}  # topic -> channel of Foxglove messages, registered on first use
         self._writer.flush()
         self._good_size = self._file.tell()  # the file up to its last complete flush
         self._thread = threading.Thread(target=self._run, name="sa-recorder", daemon=True)
         self._thread.start()
 
-    def add(self, topic: str, msg: dict[str, Any], t_ns: int | None = None) -> None:
-        """Queue ``msg`` on ``topic`` (``/state`` or ``/event``); never blocks (drops when full, and
-        once the recording has stopped on a write error)."""
+    def add(self, topic: str, msg: Any, t_ns: int | None = None) -> None:
+        """Queue ``msg`` on ``topic``: a dict on a JSON topic (``/state``, ``/event``, or one given at
+        construction), or a Foxglove message on any topic; never blocks (drops when full, and once the
+        recording has stopped on a write error)."""
         if self.error is not None:
             self.dropped += 1
             return
@@ -125,11 +131,14 @@ class Recorder:
             if item is not None:
                 topic, t_ns, msg = item
                 try:
-                    data = json.dumps(msg, separators=(",", ":")).encode()
-                    self._writer.add_message(self._channels[topic], log_time=t_ns, data=data, publish_time=t_ns)
+                    if isinstance(msg, dict):
+                        channel, data = self._channels[topic], json.dumps(msg, separators=(",", ":")).encode()
+                    else:
+                        channel, data = self._typed_channel(topic, msg), msg.encode()
+                    self._writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
                     self.written += 1
-                except (TypeError, ValueError, KeyError):  # not JSON, or no such topic: lose this one only
-                    self.dropped += 1
+                except (TypeError, ValueError, KeyError, AttributeError):  # not JSON, no such topic, not a
+                    self.dropped += 1  # Foxglove message: lose this one only
             if time.monotonic() - last_flush >= self.flush_s:
                 self._writer.flush()
                 self._flushed_ok()
@@ -137,6 +146,16 @@ class Recorder:
         self._writer.finish()
         self._file.close()
         self.flushed = self.written
+
+    def _typed_channel(self, topic: str, msg: Any) -> int:
+        """The channel of Foxglove messages on ``topic``, registered with the message type's schema."""
+        if topic not in self._typed:
+            if topic in self._channels:
+                raise KeyError(topic)  # a JSON topic
+            schema = type(msg).get_schema()
+            sid = self._writer.register_schema(schema.name, schema.encoding, schema.data)
+            self._typed[topic] = self._writer.register_channel(topic, schema.encoding, sid)
+        return self._typed[topic]
 
     def _flushed_ok(self) -> None:
         self.flushed = self.written
@@ -175,17 +194,18 @@ class Recorder:
 
 
 def read_recording(path: str | Path) -> Iterator[tuple[str, int, dict[str, Any]]]:
-    """Yield ``(topic, log_time_ns, message)`` in file order; a file cut short by a crash is read up
-    to its last complete record."""
+    """Yield ``(topic, log_time_ns, message)`` of the JSON topics in file order (the Foxglove messages
+    of the live view are skipped); a file cut short by a crash is read up to its last complete record."""
     channels: dict[int, str] = {}
     with open(path, "rb") as f:
         reader = StreamReader(f, skip_magic=False)
         try:
             for rec in reader.records:
                 if isinstance(rec, Channel):
-                    channels[rec.id] = rec.topic
-                elif isinstance(rec, Message):
-                    yield channels.get(rec.channel_id, "?"), rec.log_time, json.loads(rec.data)
+                    if rec.message_encoding == "json":
+                        channels[rec.id] = rec.topic
+                elif isinstance(rec, Message) and rec.channel_id in channels:
+                    yield channels[rec.channel_id], rec.log_time, json.loads(rec.data)
         except Exception:  # noqa: BLE001
             # A torn last record (end of file, half a chunk, a bad CRC or zstd frame) ends the
             # recording: everything before it has been yielded.

@@ -26,7 +26,7 @@ import logging
 import signal
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -50,6 +50,10 @@ from .rate import FixedRate, Ring
 from .realtime import make_realtime, set_switch_interval
 from .simtasks import SimTasks
 from .view import View
+
+if TYPE_CHECKING:
+    from ..viz.feed import VizFeed
+    from ..viz.live import LiveView
 
 log = logging.getLogger("sa_daemon")
 
@@ -91,6 +95,8 @@ class Daemon:
         self.server: ZmqServer | None = None
         self.worker: PlannerWorker | None = None
         self.recorder: Recorder | None = None
+        self.live: LiveView | None = None  # the Foxglove live view (foxglove.enabled)
+        self.viz: VizFeed | None = None  # Foxglove messages for the live view and the recording
         self._commanded_seq = 0
         self._heartbeat: dict[str, float] = {}
         self._stop_event: asyncio.Event | None = None
@@ -121,6 +127,8 @@ class Daemon:
             self.server.publish(TOPIC_EVENT, msg)
         if self.recorder is not None:
             self.recorder.add("/event", msg)
+        if self.viz is not None:
+            self.viz.event(msg)
         self.events_sent += 1
         if self.opts.progress and kind not in ("plan",):
             detail = " ".join(f"{k}={v}" for k, v in fields.items())
@@ -167,6 +175,8 @@ class Daemon:
         self.ctl.new_goals(scene.goals)
         if had_question:
             self.asker.cleared()
+        if self.viz is not None:
+            self.viz.new_scene(messages.scene(self.view))
         self.event("scene", name=scene.name, objects=[o.name for o in scene.objects], targets=list(scene.targets),
                    dropped=dropped)
 
@@ -312,8 +322,12 @@ class Daemon:
         while True:
             mono = await rate.tick()
             self._heartbeat["publish"] = mono
-            if self.server is not None and self.arm_state is not None:
-                self.server.publish(TOPIC_STATE, messages.state_message(self.view))
+            if self.arm_state is not None and (self.server is not None or self.viz is not None):
+                state = messages.state_message(self.view)
+                if self.server is not None:
+                    self.server.publish(TOPIC_STATE, state)
+                if self.viz is not None:
+                    self.viz.state(state)
             if self.opts.progress and mono - last_progress >= 1.0 and self.arm_state is not None:
                 last_progress = mono
                 self.console.write(messages.progress_line(self.view))
@@ -374,7 +388,8 @@ class Daemon:
             self.notifier.notify("READY=1", f"STATUS=running {opts.arm} arm, {opts.input} input, {self.method}")
             self.event("ready", arm=self.arm.name if self.arm else opts.arm, input=opts.input, method=self.method,
                        scene=opts.scene.name,
-                       pub=self.server.pub_endpoint, cmd=self.server.cmd_endpoint)  # type: ignore[union-attr]
+                       pub=self.server.pub_endpoint, cmd=self.server.cmd_endpoint,  # type: ignore[union-attr]
+                       foxglove=self.live.url if self.live is not None else None)
             if opts.profile is not None:
                 log.info("profile %s (%s): %s", opts.profile["name"], opts.profile["path"], ", ".join(opts.profile["keys"]))
                 self.event("profile", **opts.profile)

@@ -1,5 +1,5 @@
-"""Starting and stopping a daemon's components: input, arm, loop clocks, sockets, recorder, speech, voice,
-planner worker and the simulated user's tasks; and, at the end, the arm first.
+"""Starting and stopping a daemon's components: input, arm, loop clocks, sockets, recorder, live view,
+speech, voice, planner worker and the simulated user's tasks; and, at the end, the arm first.
 
 Functions of a :class:`~.daemon.Daemon`; its :meth:`~.daemon.Daemon.run` calls them in order.
 """
@@ -18,6 +18,7 @@ from ..io.server import ZmqServer
 from ..model.methods import method_spec
 from ..planner.worker import PlannerWorker, WorkerStatus
 from ..speech.speaker import PLAYER, PLAYER_PACKAGE, Speaker
+from . import messages
 from .rate import FixedRate
 from .siminput import SimInput
 from .simtasks import SimTasks
@@ -61,9 +62,11 @@ def start_components(d: Daemon) -> None:
     if opts.record:
         path = opts.record.replace("{time}", time.strftime("%Y%m%d-%H%M%S"))
         try:
-            d.recorder = Recorder(path, cfg.record.flush_s, on_error=lambda text: record_error(d, text))
+            d.recorder = Recorder(path, cfg.record.flush_s, on_error=lambda text: record_error(d, text),
+                                  json_topics=viz_json_topics())
         except OSError as e:
             raise OSError(f"record.path (--record) {path}: cannot write: {e.strerror or e}") from None
+    start_viz(d)
     d.asker.bind(asyncio.get_running_loop())
     if cfg.speech.enabled:
         d.asker.speaker = Speaker(cfg.speech, on_done=d.asker.on_spoken)
@@ -78,6 +81,29 @@ def start_components(d: Daemon) -> None:
     if opts.input == "sim":
         d.sim = SimTasks(d, SimInput(opts.scene, opts.tasks, cfg, 1.0 / cfg.runtime.belief_hz, opts.seed))
         d.sim.begin()
+
+
+def viz_json_topics() -> dict:
+    """The JSON topics of the live view a recording carries too (with their schemas)."""
+    from ..viz.messages import (
+        BELIEF_SCHEMA,  # (imports the Foxglove SDK: only when it is used)
+    )
+
+    return {"/belief": BELIEF_SCHEMA}
+
+
+def start_viz(d: Daemon) -> None:
+    """The Foxglove live view (``foxglove.enabled``) and the feed that gives it and the recording the same
+    topics (``docs/foxglove.md``); nothing when neither is on."""
+    from ..viz.feed import VizFeed
+    from ..viz.live import LiveView
+
+    fx = d.cfg.foxglove
+    if fx.enabled:
+        d.live = LiveView(fx.port)  # (raises OSError naming foxglove.port)
+    sinks = [s.log for s in (d.live,) if s is not None] + [s.add for s in (d.recorder,) if s is not None]
+    if sinks:
+        d.viz = VizFeed(messages.scene(d.view), sinks, fx.scene_period_s, fx.belief_step)
 
 
 async def wait_ready(d: Daemon) -> None:
@@ -127,6 +153,8 @@ async def shutdown(d: Daemon, tasks: list[asyncio.Task], exit_code: int) -> None
         d.recorder.close()
         if d.recorder.error is not None:  # (finishing the file failed: the loop may not run again)
             _record_failed(d, d.recorder.error)
+    if d.live is not None:
+        d.live.close()
     if d.server is not None:
         d.server.close()
         d.server = None  # a late callback (an utterance ended by the speaker's close) publishes nothing

@@ -40,6 +40,7 @@ def status(v: View) -> dict[str, Any]:
         "control": v.control(),
         "commands": v.commands(),
         "record": v.record(),
+        "foxglove": v.foxglove(),
         "speech": v.speech(),
         "voice": v.voice(),
     }

@@ -187,6 +187,13 @@ class View:
         return {"path": str(r.path), "written": r.written, "flushed": r.flushed, "dropped": r.dropped,
                 "error": r.error}
 
+    def foxglove(self) -> dict[str, Any] | None:
+        live = self._d.live
+        if live is None:
+            return None
+        viz = self._d.viz
+        return {"url": live.url, "sent": viz.sent if viz is not None else 0}
+
     def speech(self) -> dict[str, Any] | None:
         s = self._d.asker.speaker
         return s.status() if s is not None else None

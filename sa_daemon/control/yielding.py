@@ -1,0 +1,67 @@
+"""When the robot yields: the paper's future work (section VI-E.4, VII), both off by default.
+
+Two free functions of the controller's state, each returning the reason the robot should not assist
+now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; and :class:`OppositionWindow`, the short
+history of the user's opposition the second one reads. The controller turns moves and HO into
+no-assistance while either gives a reason.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from ..geometry import Pose
+from ..world.goalset import GoalSet
+
+
+class OppositionWindow:
+    """Whether the user's input opposed the assistance, for each control period with input over the last
+    ``window_s`` seconds (the reward's opposition test, ``reward.opposition_threshold``)."""
+
+    def __init__(self, window_s: float) -> None:
+        self._window_s = window_s
+        self._periods: deque[tuple[float, bool]] = deque()  # (t s, opposed)
+
+    @property
+    def window_s(self) -> float:
+        """The history's length, s."""
+        return self._window_s
+
+    def add(self, t: float, opposed: bool) -> None:
+        """One control period with input at ``t`` (s)."""
+        self._periods.append((t, opposed))
+
+    def counts(self, t: float) -> tuple[int, int, float]:
+        """``(opposed periods, periods, time they span in s)`` over the window ending at ``t`` (s)."""
+        while self._periods and self._periods[0][0] < t - self._window_s:
+            self._periods.popleft()
+        n = len(self._periods)
+        span = self._periods[-1][0] - self._periods[0][0] if n else 0.0
+        return sum(o for _, o in self._periods), n, span
+
+    def clear(self) -> None:
+        self._periods.clear()
+
+
+def user_opposes(window: OppositionWindow, t: float, share: float) -> str | None:
+    """``"user_opposes"`` when at least ``share`` of the periods with input over the window (spanning at
+    least half of it) opposed the assistance: the user wants a pose of their own."""
+    opposed, n, span = window.counts(t)
+    return "user_opposes" if span >= 0.5 * window.window_s and opposed >= share * n else None
+
+
+def near_object(goals: GoalSet, probs: np.ndarray, pose: Pose, distance_m: float, belief_share: float) -> str | None:
+    """``"near_object"`` when the most likely object (its targets' probabilities summed) holds at least
+    ``belief_share`` of the belief and one of its grasp poses is within ``distance_m`` (m) of the TCP
+    ``pose``: the person fine-tunes alone."""
+    by_object: dict[str, float] = {}
+    for target, p in goals.target_probabilities(probs).items():
+        obj = target.split(":", 1)[0]
+        by_object[obj] = by_object.get(obj, 0.0) + p
+    obj, held = max(by_object.items(), key=lambda kv: kv[1])
+    if held < belief_share:
+        return None
+    nearest = min(float(np.linalg.norm(p.position - pose.position)) for g in goals.goals if g.object == obj for p in g.poses)
+    return "near_object" if nearest <= distance_m else None
