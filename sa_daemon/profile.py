@@ -29,7 +29,7 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
                            "button_gripper", "button_yes", "button_no", "button_assist", "button_stop",
                            "button_other"}),
     "input": frozenset({"filter_hz"}),
-    "blend": frozenset({"alpha"}),
+    "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
     "asking": frozenset({"max_per_task", "answer_sources", "third_answer"}),
 }

@@ -150,13 +150,18 @@ def test_the_feed_sends_the_bulky_scene_only_when_it_changed_or_is_due():
     assert [t for t, _ in sent(uniform)] == ["/scene", "/belief"]  # the gripper only
     moved = dict(uniform, **{"cup:top": uniform["cup:top"] + 0.02, "bowl:top": uniform["bowl:top"] - 0.02})
     assert sent(moved)[0][1] > 1  # the belief moved by more than 0.01: redrawn
+    clock[0] = 600_000_000
+    again = dict(moved, **{"cup:top": moved["cup:top"] + 0.05, "bowl:top": moved["bowl:top"] - 0.05})
+    assert [t for t, _ in sent(again)] == ["/scene", "/belief"]  # moved, but 0.1 s after the last drawing
+    clock[0] = 800_000_000
+    assert sent(again)[0][1] > 1  # 0.2 s after it
     clock[0] = 1_400_000_000
-    assert [t for t, _ in sent(moved)] == ["/scene", "/belief"]
-    clock[0] = 1_600_000_000
-    assert sent(moved)[0][1] > 1  # a second after the last drawing: redrawn for late viewers
+    assert [t for t, _ in sent(again)] == ["/scene", "/belief"]  # unchanged since
+    clock[0] = 1_800_000_000
+    assert sent(again)[0][1] > 1  # a second after the last drawing: redrawn for late viewers
     feed.new_scene(SCENE1)
     got.clear()
-    feed.state(_state(moved))
+    feed.state(_state(again))
     assert len(decode(got[0][1]).deletions) == 1
     got.clear()
     feed.event({"type": "plan"})

@@ -47,6 +47,9 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     assert load_profile(str(f), "/nowhere").overrides == p.overrides
     (tmp_path / "kim.toml").write_text('name = "kim"\n[blend]\nalpha = 0.6\n')
     assert load_profile("kim", str(tmp_path)).apply(Config()).blend.alpha == 0.6  # a name, in profiles.dir
+    # A person who wants to fine-tune alone (section VI-E.4): the yield switches are theirs to set.
+    fine = parse_profile({"name": "sam", "blend": {"yield_near_m": 0.05, "opposition_window_s": 1.0}}, "sam.toml")
+    assert (fine.apply(Config()).blend.yield_near_m, fine.apply(Config()).blend.opposition_window_s) == (0.05, 1.0)
     assert p.keys() == ["asking.answer_sources", "asking.max_per_task", "blend.alpha", "input.filter_hz",
                         "joystick.deadzone", "joystick.gains", "speech.rate_wpm", "speech.voice"]
 
@@ -61,6 +64,7 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     ({"name": "a", "joystick": {"centre": [1, 2, 3]}}, "centre"),  # without low and high
     ({"name": "a", "asking": {"answer_sources": ["telepathy"]}}, "answer_sources"),
     ({"name": "a", "input": {"filter_hz": -1}}, "filter_hz"),
+    ({"name": "a", "blend": {"yield_near_m": 0.9}}, "yield_near_m"),  # above 0.5 m
     ({"summary": "no name"}, "name"),
 ])
 def test_a_bad_profile_is_refused_naming_the_key(data, key):

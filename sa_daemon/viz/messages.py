@@ -163,15 +163,16 @@ def _object_entity(obj: Mapping[str, Any], share: float, stamp: Timestamp) -> Sc
                        cylinders=cylinders, spheres=spheres, texts=[label])
 
 
-def _grasps_entity(target: str, poses: Sequence[Mapping[str, Any]], p: float, stamp: Timestamp) -> SceneEntity:
-    color = probability_color(p)
-    arrows = []
+def _grasp_arrow_poses(poses: Sequence[Mapping[str, Any]]) -> list[Pose]:
+    """Each grasp pose's arrow: its tail :data:`GRASP_ARROW_M` back along the approach (tool z), +x
+    along the approach, so that it ends at the grasp's TCP."""
+    out = []
     for pose in poses:
         q = pose["quat_wxyz"]
         approach = _rotate(q, (0.0, 0.0, 1.0))
         tail = [c - GRASP_ARROW_M * a for c, a in zip(pose["position"], approach, strict=True)]
-        arrows.append(_arrow(tail, _qmul(q, _X_TO_Z), GRASP_ARROW_M, color, diameter=0.003))
-    return SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"grasps/{target}", arrows=arrows)
+        out.append(_pose(tail, _qmul(q, _X_TO_Z)))
+    return out
 
 
 def _table_entity(scene: Mapping[str, Any], stamp: Timestamp) -> SceneEntity:
@@ -185,19 +186,41 @@ def _table_entity(scene: Mapping[str, Any], stamp: Timestamp) -> SceneEntity:
     return SceneEntity(timestamp=stamp, frame_id=FRAME, id="table", cubes=[cube])
 
 
+class SceneDrawing:
+    """The table, the objects and every target's grasp poses of one ``scene`` reply; the geometry is
+    computed once, :meth:`update` colours it by a belief (the feed redraws it often)."""
+
+    def __init__(self, scene: Mapping[str, Any]) -> None:
+        self._scene = scene
+        self._arrows = {g["target"]: _grasp_arrow_poses(g["poses"]) for g in scene["goals"]}
+        head = 0.3 * GRASP_ARROW_M
+        self._arrow_shape = {"shaft_length": GRASP_ARROW_M - head, "shaft_diameter": 0.003, "head_length": head,
+                             "head_diameter": 0.0075}
+
+    @property
+    def name(self) -> str:
+        """The scene's name."""
+        return str(self._scene.get("name", ""))
+
+    def update(self, belief: Mapping[str, float], t_ns: int, replace: bool = False) -> SceneUpdate:
+        """Every entity coloured by ``belief`` (target -> probability; a target missing from it is drawn
+        at 0). With ``replace`` every entity of an earlier scene is deleted first."""
+        stamp = _ts(t_ns)
+        shares = object_shares(belief)
+        entities = [_table_entity(self._scene, stamp)]
+        entities += [_object_entity(o, shares.get(o["name"], 0.0), stamp) for o in self._scene["objects"]]
+        for target, poses in self._arrows.items():
+            color = probability_color(float(belief.get(target, 0.0)))
+            arrows = [ArrowPrimitive(pose=p, color=color, **self._arrow_shape) for p in poses]
+            entities.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"grasps/{target}", arrows=arrows))
+        deletions = [SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)] if replace else []
+        return SceneUpdate(deletions=deletions, entities=entities)
+
+
 def scene_update(scene: Mapping[str, Any], belief: Mapping[str, float], t_ns: int,
                  replace: bool = False) -> SceneUpdate:
-    """The table, the objects and every target's grasp poses, coloured by ``belief`` (target ->
-    probability; targets missing from it are drawn at 0). With ``replace`` every entity of an earlier
-    scene is deleted first (a ``set_scene`` changed the scene)."""
-    stamp = _ts(t_ns)
-    shares = object_shares(belief)
-    entities = [_table_entity(scene, stamp)]
-    entities += [_object_entity(o, shares.get(o["name"], 0.0), stamp) for o in scene["objects"]]
-    entities += [_grasps_entity(g["target"], g["poses"], float(belief.get(g["target"], 0.0)), stamp)
-                 for g in scene["goals"]]
-    deletions = [SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)] if replace else []
-    return SceneUpdate(deletions=deletions, entities=entities)
+    """:meth:`SceneDrawing.update` of ``scene`` (drawn once)."""
+    return SceneDrawing(scene).update(belief, t_ns, replace)
 
 
 def gripper_update(state: Mapping[str, Any], t_ns: int) -> SceneUpdate:
