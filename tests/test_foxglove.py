@@ -194,12 +194,14 @@ async def _watch(url: str, seconds: float, on_connect=None) -> tuple[dict, dict[
             else:
                 decoders[i] = (c["topic"], json.loads)
         await ws.send_json({"op": "subscribe", "subscriptions": subs})
+        first = await ws.receive(timeout=10)  # the subscription is in force from here on
         if on_connect is not None:
             await on_connect()
         end = asyncio.get_running_loop().time() + seconds
+        pending = [first]
         while (left := end - asyncio.get_running_loop().time()) > 0:
             try:
-                m = await ws.receive(timeout=left)
+                m = pending.pop() if pending else await ws.receive(timeout=left)
             except TimeoutError:
                 break
             if m.type == aiohttp.WSMsgType.BINARY and m.data[0] == MESSAGE_DATA:
