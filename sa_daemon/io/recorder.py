@@ -63,6 +63,10 @@ EVENT_SCHEMA = {
 }
 
 _STOP = object()
+BATCH_S = 0.02
+"""The writer thread sleeps this long after each batch it writes (s)."""
+BATCH_MAX = 1000
+"""Messages written in one batch at most."""
 
 
 class Recorder:
@@ -120,32 +124,46 @@ class Recorder:
                 self.dropped += 1
 
     def _write_until_stopped(self) -> None:
+        """Write in batches: wait for a message, take what else is queued, write it all, then sleep
+        :data:`BATCH_S`, so that the thread wakes (and takes the interpreter's lock from the event loop)
+        about 1 / BATCH_S times a second rather than once per message."""
         last_flush = time.monotonic()
-        while True:
+        stop = False
+        while not stop:
             try:
-                item = self._q.get(timeout=self.flush_s / 2)
+                batch = [self._q.get(timeout=self.flush_s / 2)]
             except queue.Empty:
-                item = None
-            if item is _STOP:
-                break
-            if item is not None:
-                topic, t_ns, msg = item
+                batch = []
+            while batch and len(batch) < BATCH_MAX:
                 try:
-                    if isinstance(msg, dict):
-                        channel, data = self._channels[topic], json.dumps(msg, separators=(",", ":")).encode()
-                    else:
-                        channel, data = self._typed_channel(topic, msg), msg.encode()
-                    self._writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
-                    self.written += 1
-                except (TypeError, ValueError, KeyError, AttributeError):  # not JSON, no such topic, not a
-                    self.dropped += 1  # Foxglove message: lose this one only
+                    batch.append(self._q.get_nowait())
+                except queue.Empty:
+                    break
+            for item in batch:
+                if item is _STOP:
+                    stop = True
+                    break
+                self._write(*item)
             if time.monotonic() - last_flush >= self.flush_s:
                 self._writer.flush()
                 self._flushed_ok()
                 last_flush = time.monotonic()
+            if batch and not stop:
+                time.sleep(BATCH_S)
         self._writer.finish()
         self._file.close()
         self.flushed = self.written
+
+    def _write(self, topic: str, t_ns: int, msg: Any) -> None:
+        try:
+            if isinstance(msg, dict):
+                channel, data = self._channels[topic], json.dumps(msg, separators=(",", ":")).encode()
+            else:
+                channel, data = self._typed_channel(topic, msg), msg.encode()
+            self._writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
+            self.written += 1
+        except (TypeError, ValueError, KeyError, AttributeError):  # not JSON, no such topic, not a Foxglove
+            self.dropped += 1  # message: lose this one only
 
     def _typed_channel(self, topic: str, msg: Any) -> int:
         """The channel of Foxglove messages on ``topic``, registered with the message type's schema."""
