@@ -27,6 +27,7 @@ from mcap.reader import make_reader
 from sa_daemon.runtime.messages import scene as scene_reply
 from sa_daemon.viz import messages as fx
 from sa_daemon.viz.feed import VizFeed
+from sa_daemon.world.goals import object_probabilities
 from sa_daemon.world.scene import load_scene
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # the SDK's server accepts only this one (ws-protocol's v1 framing)
@@ -98,7 +99,7 @@ def test_the_scene_has_the_table_every_object_and_every_grasp_pose_coloured_by_t
     # An object's share is its targets' sum, shown on its label.
     cup = ents["object/cup"]
     assert cup.texts[0].text == "cup 0.90" and len(cup.cylinders) == 1
-    assert fx.object_shares(belief)["cup"] == pytest.approx(0.9)
+    assert object_probabilities(belief)["cup"] == pytest.approx(0.9)
     assert not up.deletions
     replaced = decode(fx.scene_update(SCENE1, belief, 1, replace=True))
     assert len(replaced.deletions) == 1 and replaced.deletions[0].type == 1  # ALL: the old scene goes

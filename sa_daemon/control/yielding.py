@@ -13,6 +13,7 @@ from collections import deque
 import numpy as np
 
 from ..geometry import Pose
+from ..world.goals import object_probabilities
 from ..world.goalset import GoalSet
 
 
@@ -56,11 +57,7 @@ def near_object(goals: GoalSet, probs: np.ndarray, pose: Pose, distance_m: float
     """``"near_object"`` when the most likely object (its targets' probabilities summed) holds at least
     ``belief_share`` of the belief and one of its grasp poses is within ``distance_m`` (m) of the TCP
     ``pose``: the person fine-tunes alone."""
-    by_object: dict[str, float] = {}
-    for target, p in goals.target_probabilities(probs).items():
-        obj = target.split(":", 1)[0]
-        by_object[obj] = by_object.get(obj, 0.0) + p
-    obj, held = max(by_object.items(), key=lambda kv: kv[1])
+    obj, held = max(object_probabilities(goals.target_probabilities(probs)).items(), key=lambda kv: kv[1])
     if held < belief_share:
         return None
     nearest = min(float(np.linalg.norm(p.position - pose.position)) for g in goals.goals if g.object == obj for p in g.poses)

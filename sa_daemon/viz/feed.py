@@ -8,7 +8,7 @@ state; the table, objects and grasp poses (the bulk: one arrow per grasp pose) o
 changes, when a target's probability has moved by more than ``belief_step`` since they were last
 drawn (at most every ``min_redraw_s``), and at least every ``scene_period_s`` (a viewer that connects
 late sees them within that). Drawing Scene 1's 54 grasp poses costs about 80 us (geometry computed once
-per scene, :class:`~.messages.SceneDrawing`), the gripper about 20 us.
+per scene, :class:`~.messages.SceneDrawing`), the gripper about 30 us.
 """
 
 from __future__ import annotations
@@ -48,11 +48,6 @@ class VizFeed:
         self._drawn_ns = 0
         self._replace = False
         self.sent = 0
-
-    @property
-    def scene_name(self) -> str:
-        """The name of the scene being drawn."""
-        return self._drawing.name
 
     def _send(self, topic: str, msg: Any, t_ns: int) -> None:
         for sink in self._sinks:

@@ -22,6 +22,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 from foxglove.messages import (
     ArrowPrimitive,
     Color,
@@ -40,6 +41,9 @@ from foxglove.messages import (
     Timestamp,
     Vector3,
 )
+
+from ..geometry import quat_mul, quat_to_matrix
+from ..world.goals import object_probabilities
 
 FRAME = "base"
 """The frame id of every entity: the arm base frame."""
@@ -89,28 +93,22 @@ def _pose(position: Sequence[float], quat_wxyz: Sequence[float] = (1.0, 0.0, 0.0
     return Pose(position=Vector3(x=px, y=py, z=pz), orientation=Quaternion(x=x, y=y, z=z, w=w))
 
 
-def _qmul(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-def _rotate(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
-    _, x, y, z = _qmul(_qmul(q, (0.0, *v)), (q[0], -q[1], -q[2], -q[3]))
-    return (x, y, z)
-
-
 _X_TO_Z = (math.cos(-math.pi / 4), 0.0, math.sin(-math.pi / 4), 0.0)  # -90 deg about y: arrow x -> tool z
 _X_TO_Y = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # +90 deg about z: arrow x -> tool y
+
+
+def _arrow_dims(length: float, diameter: float) -> dict[str, float]:
+    """An arrow's shaft and head (m) for a total ``length``: the head 30 % of it, at most 2 cm, and 2.5
+    times as wide as the shaft."""
+    head = min(0.3 * length, 0.02)
+    return {"shaft_length": max(length - head, 0.0), "shaft_diameter": diameter, "head_length": head,
+            "head_diameter": 2.5 * diameter}
 
 
 def _arrow(tail: Sequence[float], quat_wxyz: Sequence[float], length: float, color: Color,
            diameter: float = 0.006) -> ArrowPrimitive:
     """An arrow from ``tail`` along the +x axis of ``quat_wxyz``, ``length`` m long in total."""
-    head = min(0.3 * length, 0.02)
-    return ArrowPrimitive(pose=_pose(tail, quat_wxyz), shaft_length=max(length - head, 0.0), shaft_diameter=diameter,
-                          head_length=head, head_diameter=2.5 * diameter, color=color)
+    return ArrowPrimitive(pose=_pose(tail, quat_wxyz), color=color, **_arrow_dims(length, diameter))
 
 
 def _direction_quat(v: Sequence[float]) -> tuple[float, float, float, float]:
@@ -127,15 +125,6 @@ def _direction_quat(v: Sequence[float]) -> tuple[float, float, float, float]:
 
 def _ts(t_ns: int) -> Timestamp:
     return Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
-
-
-def object_shares(belief: Mapping[str, float]) -> dict[str, float]:
-    """The belief summed per object (``object:grasp_type`` targets)."""
-    out: dict[str, float] = {}
-    for target, p in belief.items():
-        obj = target.split(":", 1)[0]
-        out[obj] = out.get(obj, 0.0) + float(p)
-    return out
 
 
 def _object_entity(obj: Mapping[str, Any], share: float, stamp: Timestamp) -> SceneEntity:
@@ -169,9 +158,8 @@ def _grasp_arrow_poses(poses: Sequence[Mapping[str, Any]]) -> list[Pose]:
     out = []
     for pose in poses:
         q = pose["quat_wxyz"]
-        approach = _rotate(q, (0.0, 0.0, 1.0))
-        tail = [c - GRASP_ARROW_M * a for c, a in zip(pose["position"], approach, strict=True)]
-        out.append(_pose(tail, _qmul(q, _X_TO_Z)))
+        approach = quat_to_matrix(q)[:, 2]  # tool z
+        out.append(_pose(np.asarray(pose["position"]) - GRASP_ARROW_M * approach, quat_mul(q, _X_TO_Z)))
     return out
 
 
@@ -193,20 +181,13 @@ class SceneDrawing:
     def __init__(self, scene: Mapping[str, Any]) -> None:
         self._scene = scene
         self._arrows = {g["target"]: _grasp_arrow_poses(g["poses"]) for g in scene["goals"]}
-        head = 0.3 * GRASP_ARROW_M
-        self._arrow_shape = {"shaft_length": GRASP_ARROW_M - head, "shaft_diameter": 0.003, "head_length": head,
-                             "head_diameter": 0.0075}
-
-    @property
-    def name(self) -> str:
-        """The scene's name."""
-        return str(self._scene.get("name", ""))
+        self._arrow_shape = _arrow_dims(GRASP_ARROW_M, 0.003)
 
     def update(self, belief: Mapping[str, float], t_ns: int, replace: bool = False) -> SceneUpdate:
         """Every entity coloured by ``belief`` (target -> probability; a target missing from it is drawn
         at 0). With ``replace`` every entity of an earlier scene is deleted first."""
         stamp = _ts(t_ns)
-        shares = object_shares(belief)
+        shares = object_probabilities(belief)
         entities = [_table_entity(self._scene, stamp)]
         entities += [_object_entity(o, shares.get(o["name"], 0.0), stamp) for o in self._scene["objects"]]
         for target, poses in self._arrows.items():
@@ -231,9 +212,10 @@ def gripper_update(state: Mapping[str, Any], t_ns: int) -> SceneUpdate:
         return SceneUpdate()
     p, q = pose["position"], pose["quat_wxyz"]
     closed = bool(state.get("gripper_closed"))
+    q_y, q_z = quat_mul(q, (_X_TO_Y, _X_TO_Z))  # the arrows along tool y and tool z
     arrows = [_arrow(p, q, AXES_M, Color(r=1.0, g=0.1, b=0.1, a=1.0)),
-              _arrow(p, _qmul(q, _X_TO_Y), AXES_M, Color(r=0.1, g=0.9, b=0.1, a=1.0)),
-              _arrow(p, _qmul(q, _X_TO_Z), AXES_M, Color(r=0.1, g=0.3, b=1.0, a=1.0))]
+              _arrow(p, q_y, AXES_M, Color(r=0.1, g=0.9, b=0.1, a=1.0)),
+              _arrow(p, q_z, AXES_M, Color(r=0.1, g=0.3, b=1.0, a=1.0))]
     for key, color in (("command_twist", Color(r=0.75, g=0.2, b=0.95, a=0.9)),
                        ("user_twist", Color(r=0.1, g=0.85, b=0.85, a=0.9))):
         v = [float(c) for c in state.get(key, [0.0] * 6)[:3]]

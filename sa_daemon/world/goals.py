@@ -8,6 +8,7 @@ subset of its grasp poses; :attr:`Goal.target` names the shared target.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -48,6 +49,16 @@ def parse_target(text: str) -> tuple[str, GraspType]:
     except ValueError:
         names = ", ".join(t.value for t in GraspType)
         raise ValueError(f"task {text!r}: unknown grasp type {kind!r} (one of {names})") from None
+
+
+def object_probabilities(target_probabilities: Mapping[str, float]) -> dict[str, float]:
+    """The belief summed per object: ``{"cup": p(cup:top) + p(cup:side), ...}`` from target probabilities
+    keyed ``"object:grasp_type"`` (in their order of first appearance)."""
+    out: dict[str, float] = {}
+    for target, p in target_probabilities.items():
+        obj = target.rpartition(":")[0]
+        out[obj] = out.get(obj, 0.0) + float(p)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
