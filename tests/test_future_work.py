@@ -154,3 +154,45 @@ def test_a_daemon_with_the_third_answer_takes_it_through_the_protocol(tmp_path):
             assert not r["ok"] and "no other grasp type" in r["error"]
     finally:
         d.close()
+
+
+def test_a_spoken_other_grasp_is_taken_only_for_an_object_with_another_grasp_type():
+    """The daemon's side of the voice (runtime/asking.py): the window tells the voice process whether the
+    question takes "other grasp", and a heard "other" is applied or refused with the reason."""
+    from sa_daemon.runtime.asking import Asker
+
+    class Voice:  # the voice process's daemon-side handle, at its interface (speech/listener.py)
+        ready = True
+
+        def __init__(self):
+            self.windows = []
+
+        def listen(self, qid, t_open, t_close, third=False):
+            self.windows.append((qid, third))
+
+        def mute(self):
+            pass
+
+    heard = {"confidence": 0.9, "words": "other grasp", "check": "other grass", "seconds": 1.0, "decode_s": 0.2}
+    for third_on in (False, True):
+        cfg = config_from_dict({"asking": {"third_answer": third_on}, "voice": {"min_confidence": 0.8}})
+        ctl = Controller(cfg, SCENE.goals, "policy", DT)
+        events: list[tuple[str, dict]] = []
+        voice = Voice()
+        asker = Asker(cfg, ctl, lambda kind, events=events, **f: events.append((kind, f)), voice=voice)
+        q = ctl.ask("chips can:side", 0.0)  # one grasp type: "other grasp" is no answer to it
+        asker.asked(q)
+        asker.on_heard(q.qid, {"answer": "other", **heard}, 0.0, 0.1)
+        assert voice.windows[-1] == (q.qid, False) and ctl.question is q
+        assert events[-1][0] == "heard" and events[-1][1]["accepted"] is False
+        ctl.on_answer("no", 1.0)
+        q = ctl.ask("cup:top", 1.0)
+        asker.asked(q)
+        assert voice.windows[-1] == (q.qid, third_on)
+        asker.on_heard(q.qid, {"answer": "other", **heard}, 1.0, 1.1)
+        if third_on:
+            kinds = [k for k, _ in events[-2:]]
+            assert kinds == ["heard", "answer"] and events[-1][1]["value"] == "other" and ctl.question is None
+            assert ctl.belief.target_probabilities()["cup:top"] < 1e-6
+        else:
+            assert events[-1][1]["accepted"] is False and ctl.question is q

@@ -47,13 +47,14 @@ def test_question_text(target, text):
     assert question_text(target) == text
 
 
-@pytest.mark.parametrize("yes, target, text", [
-    (True, "cup:top", "Yes: the cup, top grasp"),
-    (False, "meat can:side_horizontal", "No: the meat can, side horizontal grasp"),
-    (True, "spoon", "Yes: the spoon"),
+@pytest.mark.parametrize("answer, target, text", [
+    ("yes", "cup:top", "Yes: the cup, top grasp"),
+    ("no", "meat can:side_horizontal", "No: the meat can, side horizontal grasp"),
+    ("yes", "spoon", "Yes: the spoon"),
+    ("other", "cup:top", "Another grasp of the cup"),
 ])
-def test_echo_text(yes, target, text):
-    assert echo_text(yes, target) == text
+def test_echo_text(answer, target, text):
+    assert echo_text(answer, target) == text
 
 
 @pytest.mark.parametrize("library", ["wheel", pytest.param("system", marks=needs_system_espeak)])

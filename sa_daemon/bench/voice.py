@@ -1,8 +1,8 @@
-"""``sa-daemon bench voice``: recognition and false-accept rates of the yes/no recogniser.
+"""``sa-daemon bench voice``: recognition and false-accept rates of the answer recogniser.
 
 Every utterance is synthesised here by espeak-ng (the speaker's own engine and library) and goes
 through the microphone's path: resampled to 16 kHz, padded with silence, cut by
-:class:`~..speech.audio.UtteranceCutter`, classified by :class:`~..speech.recogniser.YesNoRecogniser`.
+:class:`~..speech.audio.UtteranceCutter`, classified by :class:`~..speech.recogniser.AnswerRecogniser`.
 The set is fixed in this file (voices, rates, phrases, noises), chosen before any measurement:
 
 * **answers**: 5 yes and 4 no phrases x 8 voices x 2 rates, clean and with white noise at 10 dB SNR;
@@ -10,6 +10,11 @@ The set is fixed in this file (voices, rates, phrases, noises), chosen before an
   and at 10 dB SNR: any yes/no here is a false accept;
 * **near**: words that sound like an answer ("know" is "no"): reported, no target;
 * **noise**: white, pink, 50 Hz hum, two people talking at once, clicks: any yes/no is a false accept.
+
+With ``third`` (``--third-answer``, ``asking.third_answer``) the recogniser also takes "other grasp", and
+the set gains the third answer's 3 phrases (as the answers: 8 voices x 2 rates, clean and noisy) and 6
+other phrases that share a word with it ("another one", "other way"...), whose acceptance as anything
+is a false accept.
 
 Targets (issue 13): >= 95 % of clear answers recognised, 0 false accepts on other phrases and noise.
 """
@@ -21,6 +26,7 @@ import multiprocessing as mp
 import tempfile
 import time
 from collections import Counter
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +35,7 @@ import numpy as np
 from ..config import VoiceConfig
 from ..speech import espeak
 from ..speech.audio import answer_in
-from ..speech.recogniser import SAMPLE_RATE, YesNoRecogniser, to_16k
+from ..speech.recogniser import SAMPLE_RATE, AnswerRecogniser, to_16k
 
 YES_PHRASES = ("yes", "yeah", "yep", "yup", "yes please")
 NO_PHRASES = ("no", "nope", "nah", "no thanks")
@@ -39,6 +45,8 @@ OTHER_PHRASES = (
     "yellow", "now",
 )
 NEAR_PHRASES = ("know", "nose", "snow", "yet", "mess")
+THIRD_PHRASES = ("other grasp", "another grasp", "different grasp")
+THIRD_OTHER_PHRASES = ("another one", "other way", "another cup", "grass", "the other side", "other hand")
 VOICES = ("en-us", "en", "en-gb-x-rp", "en-us+f3", "en+m3", "en-gb-scotland", "en-029", "en-us+f2")
 ANSWER_RATES = (130, 175)
 OTHER_VOICES = VOICES[:4]
@@ -69,9 +77,9 @@ def _noises(rng: np.random.Generator, babble: list[np.ndarray]) -> dict[str, np.
     return {k: np.clip(v, -32768, 32767).astype(np.int16) for k, v in out.items()}
 
 
-def build_set(seed: int = 0) -> list[dict[str, Any]]:
-    """The bench's utterances: dicts with ``kind``, ``label`` (yes/no/none), ``text``, ``voice``, ``rate``,
-    ``condition`` and ``pcm`` (16 kHz int16)."""
+def build_set(seed: int = 0, third: bool = False) -> list[dict[str, Any]]:
+    """The bench's utterances: dicts with ``kind``, ``label`` (yes/no/none, other with ``third``), ``text``,
+    ``voice``, ``rate``, ``condition`` and ``pcm`` (16 kHz int16)."""
     rng = np.random.default_rng(seed)
     engine = espeak.pyttsx3_engine()
     items: list[dict[str, Any]] = []
@@ -92,13 +100,14 @@ def build_set(seed: int = 0) -> list[dict[str, Any]]:
             items.append(item(kind, label, text, voice, rate, x))
             items.append(item(kind, label, text, voice, rate, _add_noise(x, NOISY_SNR_DB, rng), f"snr{NOISY_SNR_DB:g}dB"))
 
-        for label, phrases in (("yes", YES_PHRASES), ("no", NO_PHRASES)):
+        answers = (("yes", YES_PHRASES), ("no", NO_PHRASES)) + ((("other", THIRD_PHRASES),) if third else ())
+        for label, phrases in answers:
             for text in phrases:
                 for voice in VOICES:
                     for rate in ANSWER_RATES:
                         add("answer", label, text, voice, rate, say(text, voice, rate))
         babble = []
-        for text in OTHER_PHRASES:
+        for text in OTHER_PHRASES + (THIRD_OTHER_PHRASES if third else ()):
             for voice in OTHER_VOICES:
                 x = say(text, voice, OTHER_RATE)
                 add("other", "none", text, voice, OTHER_RATE, x)
@@ -112,33 +121,34 @@ def build_set(seed: int = 0) -> list[dict[str, Any]]:
     return items
 
 
-_recogniser: YesNoRecogniser | None = None
+_recogniser: AnswerRecogniser | None = None
 
 
-def _classify(pcm: np.ndarray) -> dict[str, Any]:
+def _classify(pcm: np.ndarray, third: bool = False) -> dict[str, Any]:
     """(In a pool worker.) The answer in one utterance at confidence 0 (thresholded by the caller)."""
     global _recogniser
     if _recogniser is None:
-        _recogniser = YesNoRecogniser()
-    answer, confidence, heard = answer_in(pcm, _recogniser, 0.0, VoiceConfig().max_segment_s)
+        _recogniser = AnswerRecogniser()
+    answer, confidence, heard = answer_in(pcm, _recogniser, 0.0, VoiceConfig().max_segment_s, third)
     return {"answer": answer, "confidence": confidence, "segments": len(heard),
             "words": " | ".join(h.words for h in heard), "check": " | ".join(h.check for h in heard),
             "decode_s": sum(h.decode_s for h in heard)}
 
 
-def run_voice_bench(min_confidence: float, jobs: int = 2, seed: int = 0) -> dict[str, Any]:
-    """Synthesise the set, classify every utterance, count rates at ``min_confidence``."""
+def run_voice_bench(min_confidence: float, jobs: int = 2, seed: int = 0, third: bool = False) -> dict[str, Any]:
+    """Synthesise the set, classify every utterance, count rates at ``min_confidence``; ``third``: with the
+    third answer."""
     t0 = time.perf_counter()
-    items = build_set(seed)
+    items = build_set(seed, third)
     t_synth = time.perf_counter() - t0
     ctx = mp.get_context("spawn")
     with ctx.Pool(jobs) as pool:
-        results = pool.map(_classify, [it["pcm"] for it in items], chunksize=4)
+        results = pool.map(partial(_classify, third=third), [it["pcm"] for it in items], chunksize=4)
     rows = []
     for it, r in zip(items, results, strict=True):
         accepted = r["answer"] if r["answer"] != "none" and r["confidence"] >= min_confidence else "none"
         rows.append({k: v for k, v in it.items() if k != "pcm"} | r | {"accepted": accepted})
-    return {"min_confidence": min_confidence, "synth_s": round(t_synth, 1),
+    return {"min_confidence": min_confidence, "third_answer": third, "synth_s": round(t_synth, 1),
             "run_s": round(time.perf_counter() - t0, 1), "summary": summarise(rows), "rows": rows}
 
 
@@ -169,7 +179,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def format_table(res: dict[str, Any]) -> str:
     s = res["summary"]
-    lines = [f"voice bench at min_confidence {res['min_confidence']:g} ({res['run_s']} s)",
+    third = " with the third answer" if res.get("third_answer") else ""
+    lines = [f"voice bench at min_confidence {res['min_confidence']:g}{third} ({res['run_s']} s)",
              f"{'set':<24} {'n':>4}  figure"]
     for key, v in s.items():
         if not isinstance(v, dict):

@@ -117,7 +117,7 @@ def cmd_bench_voice(args: argparse.Namespace) -> int:
     from ..bench.voice import format_table, run_voice_bench, write_json
 
     _, threshold = _voice_args(args)
-    r = run_voice_bench(threshold, jobs=args.jobs)
+    r = run_voice_bench(threshold, jobs=args.jobs, third=args.third_answer)
     print(format_table(r))
     if args.json:
         write_json(r, args.json)
@@ -126,12 +126,14 @@ def cmd_bench_voice(args: argparse.Namespace) -> int:
 
 
 def cmd_hear(args: argparse.Namespace) -> int:
-    """One word (yes, no or none) for a WAV file, with the confidence: the recogniser on your voice."""
+    """One word (yes, no, none; other with asking.third_answer) for a WAV file, with the confidence: the
+    recogniser on your voice."""
     cfg, threshold = _voice_args(args)
     from ..speech.audio import answer_in, wav_to_16k
-    from ..speech.recogniser import YesNoRecogniser
+    from ..speech.recogniser import AnswerRecogniser
 
-    word, conf, heard = answer_in(wav_to_16k(args.wav), YesNoRecogniser(), threshold, cfg.voice.max_segment_s)
+    word, conf, heard = answer_in(wav_to_16k(args.wav), AnswerRecogniser(), threshold, cfg.voice.max_segment_s,
+                                  cfg.asking.third_answer)
     print(f"{word} {conf:.2f}")
     if args.verbose:
         for h in heard:
@@ -183,14 +185,17 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--budget", type=float, default=0.1, help="anytime budget (s)")
     bp.add_argument("--no-peer", action="store_true", help="skip the pomdp_py comparison")
     bp.set_defaults(func=cmd_bench_planner)
-    bv = bsub.add_parser("voice", help="yes/no recognition and false-accept rates on espeak-ng speech")
+    bv = bsub.add_parser("voice", help="answer recognition and false-accept rates on espeak-ng speech")
     bv.add_argument("--json", help="write the figures and every utterance's result to this file")
     bv.add_argument("--min-confidence", type=float, help="default: voice.min_confidence")
     bv.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    bv.add_argument("--third-answer", action="store_true",
+                    help='with the third answer ("other grasp", asking.third_answer) and its phrases')
     bv.set_defaults(func=cmd_bench_voice)
     verbs.add_bench_parsers(bsub)
 
-    h = sub.add_parser("hear", help="recognise yes/no in a WAV file: prints yes, no or none and the confidence")
+    h = sub.add_parser("hear", help="recognise an answer in a WAV file: prints yes, no or none (other with "
+                       "asking.third_answer) and the confidence")
     h.add_argument("wav", help="16-bit PCM WAV, any rate")
     h.add_argument("--min-confidence", type=float, help="default: voice.min_confidence")
     h.add_argument("-v", "--verbose", action="store_true", help="every utterance found, on stderr")

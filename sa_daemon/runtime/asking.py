@@ -120,12 +120,17 @@ class Asker:
         if q is not None and not (self.speaker and self.speaker.speaking):
             self._listen(q)
 
+    def _third(self, q: Question) -> bool:
+        """Whether "other grasp" answers ``q``: ``asking.third_answer`` is on and its object has another
+        grasp type."""
+        return self._cfg.asking.third_answer and bool(self._ctl.belief.siblings(q.target))
+
     def _listen(self, q: Question) -> None:
         if self.voice is None or not self.voice.ready:
             return
         vc = self._cfg.voice
         t_open = time.monotonic() + vc.after_speech_s
-        self.voice.listen(q.qid, t_open, t_open + vc.listen_s)
+        self.voice.listen(q.qid, t_open, t_open + vc.listen_s, self._third(q))
         self._event("listening", goal=q.target, for_s=vc.listen_s)
 
     def on_heard(self, qid: int, heard: dict[str, Any], t_start: float, t_end: float) -> None:
@@ -135,8 +140,8 @@ class Asker:
         vc = self._cfg.voice
         if q is None or q.qid != qid:
             reason = "no question pending"
-        elif value not in ("yes", "no"):
-            reason = heard.get("reason", "not a yes or no")
+        elif value not in ("yes", "no") and not (value == "other" and self._third(q)):
+            reason = heard.get("reason", "not an answer")
         elif heard["confidence"] < vc.min_confidence:
             reason = f"confidence below voice.min_confidence {vc.min_confidence:g}"
         elif "voice" not in self._cfg.asking.answer_sources:
@@ -147,9 +152,9 @@ class Asker:
                     latency_s=round(time.monotonic() - t_end, 3))
         if reason is not None or q is None:
             return
-        self.answer(value == "yes", source="voice", confidence=heard["confidence"])
+        self.answer(value, source="voice", confidence=heard["confidence"])
         if vc.echo and self.speaker is not None:
-            self.speaker.say(echo_text(value == "yes", q.target))
+            self.speaker.say(echo_text(value, q.target))
 
     def on_voice_error(self, text: str) -> None:
         log.error("voice: %s", text)

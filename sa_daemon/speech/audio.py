@@ -26,7 +26,7 @@ import numpy as np
 
 from ..extras import require
 from .espeak import read_wav
-from .recogniser import SAMPLE_RATE, Heard, YesNoRecogniser, to_16k
+from .recogniser import SAMPLE_RATE, AnswerRecogniser, Heard, to_16k
 
 RECORDER = "arecord"
 RECORDER_PACKAGE = "alsa-utils"
@@ -185,14 +185,15 @@ def utterances_of(pcm: np.ndarray, max_s: float = 30.0) -> list[Utterance]:
     return cutter.feed(np.ascontiguousarray(pcm, dtype="<i2").tobytes(), 0.0) + cutter.end(0.0)
 
 
-def answer_in(pcm: np.ndarray, recogniser: YesNoRecogniser, min_confidence: float, max_segment_s: float
-              ) -> tuple[str, float, list[Heard]]:
+def answer_in(pcm: np.ndarray, recogniser: AnswerRecogniser, min_confidence: float, max_segment_s: float,
+              third: bool = False) -> tuple[str, float, list[Heard]]:
     """The answer in a recording (``sa-daemon hear``, ``bench voice``): its utterances are cut and
-    recognised as the microphone's are; the answer is ``yes``/``no`` when every utterance recognised at
-    ``min_confidence`` or above, and no longer than ``max_segment_s``, says the same, else ``none``.
-    Returns (answer, its confidence or the best one seen, every utterance's result)."""
+    recognised as the microphone's are; the answer is ``yes``/``no`` (or ``other`` with ``third``) when
+    every utterance recognised at ``min_confidence`` or above, and no longer than ``max_segment_s``, says
+    the same, else ``none``. Returns (answer, its confidence or the best one seen, every utterance's result)."""
     pad = np.zeros(SAMPLE_RATE // 2, dtype=np.int16)
-    heard = [recogniser.recognise(u.pcm) for u in utterances_of(np.concatenate([pad, pcm, pad]), max_segment_s + 1)]
+    heard = [recogniser.recognise(u.pcm, third)
+             for u in utterances_of(np.concatenate([pad, pcm, pad]), max_segment_s + 1)]
     answers = [h for h in heard if h.answer != "none" and h.confidence >= min_confidence
                and h.seconds <= max_segment_s]
     if answers and len({h.answer for h in answers}) == 1:

@@ -3,11 +3,12 @@
 The process (``sa-voice``) reads its :mod:`.audio` source all the time, cuts utterances, and
 recognises only those that lie inside the listening window the daemon opened for the pending
 question: from ``after_speech_s`` after the robot finished speaking the question until ``listen_s``
-later. Speech that started before the window opened (the robot's own voice, its echo) and anything
+later, with the answers that question takes (yes/no, and "other grasp" with ``asking.third_answer``). Speech that started before the window opened (the robot's own voice, its echo) and anything
 while no window is open is dropped without decoding, so the robot never answers itself. Decoding
 (up to 0.4 s) runs in this process, never on the daemon's event loop or under its interpreter lock.
 
-Messages on the pipe: daemon -> process ``("listen", qid, t_open, t_close)`` (monotonic s),
+Messages on the pipe: daemon -> process ``("listen", qid, t_open, t_close, third)`` (monotonic s; ``third``:
+the third answer is one),
 ``("mute",)``, ``None`` (exit); process -> daemon ``("hello", pid, source)``, ``("heard", qid,
 Heard.as_dict(), t_start, t_end)``, ``("error", text)`` (the source failed or ended; the process
 exits).
@@ -30,14 +31,14 @@ CHUNK_BYTES = 3200  # 0.1 s of 16 kHz int16
 def _listener_main(conn: Connection, cfg_data: dict) -> None:
     """Entry point of the voice process."""
     from .audio import UtteranceCutter, open_source
-    from .recogniser import Heard, YesNoRecogniser
+    from .recogniser import AnswerRecogniser, Heard
 
     cfg = VoiceConfig.model_validate(cfg_data)
     try:
         os.nice(5)  # below the daemon, like the planner
     except OSError:
         pass
-    window: list = [None]  # (qid, t_open, t_close) or None; written by the control thread
+    window: list = [None]  # (qid, t_open, t_close, third) or None; written by the control thread
     lock = threading.Lock()
 
     def control() -> None:
@@ -52,7 +53,7 @@ def _listener_main(conn: Connection, cfg_data: dict) -> None:
                 window[0] = tuple(msg[1:]) if msg[0] == "listen" else None
 
     try:
-        recogniser = YesNoRecogniser()
+        recogniser = AnswerRecogniser()
         cutter = UtteranceCutter(max_s=cfg.max_segment_s + 1.0)
         source = open_source(cfg.source, cfg.device)
     except Exception as e:  # noqa: BLE001 - reported to the daemon, which goes on without voice
@@ -75,7 +76,7 @@ def _listener_main(conn: Connection, cfg_data: dict) -> None:
                     heard = {**Heard("none", 0.0, "", "", u.seconds, 0.0).as_dict(), "reason": "too long for an answer"}
                     conn.send(("heard", w[0], heard, u.t_start, u.t_end))
                     continue
-                conn.send(("heard", w[0], recogniser.recognise(u.pcm).as_dict(), u.t_start, u.t_end))
+                conn.send(("heard", w[0], recogniser.recognise(u.pcm, w[3]).as_dict(), u.t_start, u.t_end))
     except (OSError, BrokenPipeError) as e:
         try:
             conn.send(("error", f"{type(e).__name__}: {e}"))
@@ -100,7 +101,7 @@ class VoiceListener:
         self.source: str | None = None
         self.error: str | None = None
         self.heard = 0
-        self.window: tuple[int, float, float] | None = None
+        self.window: tuple[int, float, float, bool] | None = None
 
     @property
     def ready(self) -> bool:
@@ -116,10 +117,10 @@ class VoiceListener:
         self._proc, self._conn, self.pid = proc, parent, proc.pid
         self._loop.add_reader(parent.fileno(), self._readable)
 
-    def listen(self, qid: int, t_open: float, t_close: float) -> None:
-        """Open the window for question ``qid`` (monotonic s)."""
-        self.window = (qid, t_open, t_close)
-        self._send(("listen", qid, t_open, t_close))
+    def listen(self, qid: int, t_open: float, t_close: float, third: bool = False) -> None:
+        """Open the window for question ``qid`` (monotonic s); ``third``: "other grasp" is an answer."""
+        self.window = (qid, t_open, t_close, third)
+        self._send(("listen", qid, t_open, t_close, third))
 
     def mute(self) -> None:
         if self.window is not None:

@@ -1,14 +1,18 @@
-"""Offline yes/no recognition of one utterance with pocketsphinx (the ``voice`` extra).
+"""Offline recognition of one spoken answer with pocketsphinx (the ``voice`` extra).
 
 The pocketsphinx wheel ships an en-US acoustic model, the CMU dictionary and a general English
 trigram model, so nothing is downloaded. One utterance (16 kHz mono int16, cut out by the listener's
 voice-activity detection) goes through two searches of one decoder:
 
 1. **answer**: a closed JSGF grammar of the answers (:data:`YES_WORDS`, :data:`NO_WORDS`, "yes
-   please", "no thanks"). It always finds *some* answer: "maybe" and "hello" come out as "yeah".
+   please", "no thanks"; with ``third`` also the third answer, :data:`OTHER_WORDS` + "grasp": "other
+   grasp", ``asking.third_answer``). It always finds *some* answer: "maybe" and "hello" come out as "yeah".
 2. **check**: the general English language model over the whole dictionary, the garbage model that
    every other word and phrase falls into. The utterance is an answer only if this free transcript
-   is itself made of answer words of the same polarity (at most two words).
+   says the same: for yes and no, it is itself made of answer words of the same polarity (at most two
+   words); for the third answer, it holds one of :data:`OTHER_WORDS` followed at once by a word that
+   begins like "grasp" (the language model spells it "grass", "grasses", "grants"...), in at most three
+   words, none of them a yes or no word.
 
 ``confidence`` is the check's posterior probability of its transcript (pocketsphinx's lattice
 posterior, 0-1) when the two agree, and 0 when they do not; the listener ignores answers below
@@ -22,6 +26,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -30,21 +35,28 @@ from ..extras import require
 SAMPLE_RATE = 16000
 YES_WORDS = ("yes", "yeah", "yep", "yup")
 NO_WORDS = ("no", "nope", "nah")
+OTHER_WORDS = ("another", "other", "different")  # + "grasp": "that object, another grasp"
 _YES_CHECK = set(YES_WORDS) | {"yea", "ya", "please"}  # the LM's spellings of the same sounds, and "yes please"
 _NO_CHECK = set(NO_WORDS) | {"thanks"}
 _FILLERS = {"<s>", "</s>", "<sil>", "(NULL)", "[NOISE]", "[SPEECH]"}
 
+_YES_NO = f"""<yes> = {' | '.join(YES_WORDS)} | yes please;
+<no> = {' | '.join(NO_WORDS)} | no thanks;
+"""
 GRAMMAR = f"""#JSGF V1.0;
 grammar answer;
 public <answer> = <yes> | <no>;
-<yes> = {' | '.join(YES_WORDS)} | yes please;
-<no> = {' | '.join(NO_WORDS)} | no thanks;
+{_YES_NO}"""
+GRAMMAR_THIRD = f"""#JSGF V1.0;
+grammar answer3;
+public <answer> = <yes> | <no> | <other>;
+{_YES_NO}<other> = ({' | '.join(OTHER_WORDS)}) grasp;
 """
 
 
 @dataclass(frozen=True)
 class Heard:
-    """What one utterance was: ``answer`` (``yes``, ``no`` or ``none``), ``confidence`` (0-1),
+    """What one utterance was: ``answer`` (``yes``, ``no``, ``other`` or ``none``), ``confidence`` (0-1),
     ``words`` (the answer grammar's reading), ``check`` (the free transcript), ``seconds`` of audio and
     ``decode_s`` (time the two searches took)."""
 
@@ -72,7 +84,16 @@ def polarity(words: str, yes: set[str], no: set[str]) -> str:
     return "none"
 
 
-class YesNoRecogniser:
+def is_other(words: str) -> bool:
+    """Whether ``words`` (a free transcript) say the third answer: at most three words, one of
+    :data:`OTHER_WORDS` followed at once by a word beginning with "gra", and no yes or no word."""
+    w = words.split()
+    if not w or len(w) > 3 or any(x in _YES_CHECK or x in _NO_CHECK for x in w):
+        return False
+    return any(a in OTHER_WORDS and b.startswith("gra") for a, b in pairwise(w))
+
+
+class AnswerRecogniser:
     """One pocketsphinx decoder with the two searches of the module doc. Not thread-safe; ~0.1 s to
     build, ~10 ms (answer) + 0.1-0.4 s (check) per utterance on one core of this machine."""
 
@@ -85,6 +106,7 @@ class YesNoRecogniser:
             lm=None, samprate=SAMPLE_RATE, loglevel="FATAL",
         )
         self._decoder.add_jsgf_string("answer", GRAMMAR)
+        self._decoder.add_jsgf_string("answer3", GRAMMAR_THIRD)
         self._decoder.add_lm_file("check", os.path.join(model, "en-us", "en-us.lm.bin"))
 
     def _search(self, name: str, pcm: bytes) -> tuple[str, float]:
@@ -99,18 +121,23 @@ class YesNoRecogniser:
         words = " ".join(w for w in h.hypstr.split() if w not in _FILLERS)
         return words, float(h.prob)
 
-    def recognise(self, pcm: np.ndarray) -> Heard:
-        """Classify one utterance (int16 samples at :data:`SAMPLE_RATE`, a little silence around it helps)."""
+    def recognise(self, pcm: np.ndarray, third: bool = False) -> Heard:
+        """Classify one utterance (int16 samples at :data:`SAMPLE_RATE`, a little silence around it helps);
+        ``third``: the third answer ("other grasp") is one of the answers."""
         t0 = time.perf_counter()
         x = np.ascontiguousarray(pcm, dtype="<i2")
         raw = x.tobytes()
-        words, _ = self._search("answer", raw)
-        answer = polarity(words, set(YES_WORDS) | {"please"}, set(NO_WORDS) | {"thanks"})
+        words, _ = self._search("answer3" if third else "answer", raw)
+        if third and is_other(words):
+            answer = "other"
+        else:
+            answer = polarity(words, set(YES_WORDS) | {"please"}, set(NO_WORDS) | {"thanks"})
         check, posterior = ("", 0.0)
         confidence = 0.0
         if answer != "none":
             check, posterior = self._search("check", raw)
-            if polarity(check, _YES_CHECK, _NO_CHECK) == answer:
+            agrees = is_other(check) if answer == "other" else polarity(check, _YES_CHECK, _NO_CHECK) == answer
+            if agrees:
                 confidence = min(max(posterior, 0.0), 1.0)
             else:
                 answer = "none"

@@ -51,10 +51,13 @@ def question_text(target: str) -> str:
     return f"Is the {obj} with {grasp} grasp your goal?" if grasp else f"Is the {obj} your goal?"
 
 
-def echo_text(yes: bool, target: str) -> str:
-    """What the robot says back after a spoken answer: ``"Yes: the cup, top grasp"``."""
+def echo_text(answer: str, target: str) -> str:
+    """What the robot says back after a spoken answer (``yes``, ``no`` or ``other``): ``"Yes: the cup,
+    top grasp"``, ``"Another grasp of the cup"``."""
     obj, grasp = _spoken_target(target)
-    return f"{'Yes' if yes else 'No'}: the {obj}" + (f", {grasp} grasp" if grasp else "")
+    if answer == "other":
+        return f"Another grasp of the {obj}"
+    return f"{'Yes' if answer == 'yes' else 'No'}: the {obj}" + (f", {grasp} grasp" if grasp else "")
 
 
 SPEECH_STATES = ("played", "written", "unavailable")
