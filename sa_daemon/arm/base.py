@@ -53,17 +53,26 @@ class Kinematics(Protocol):
         """Joint velocities (rad/s) realising ``twist`` at ``q`` (damped least squares)."""
 
 
-def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float, tcp_mps: float = math.inf) -> FloatArray:
-    """Scale the linear and the angular part so no axis exceeds its limit (m/s, rad/s) and the linear
-    part's norm does not exceed ``tcp_mps`` (m/s), keeping each direction."""
-    t = np.array(twist, dtype=float)
-    for part, limit in ((slice(0, 3), linear_mps), (slice(3, 6), angular_radps)):
-        peak = float(np.max(np.abs(t[part])))
-        if peak > limit:
-            t[part] *= limit / peak
+def speed_scales(twist: FloatArray, linear_mps: float, angular_radps: float, tcp_mps: float = math.inf
+                 ) -> tuple[float, float]:
+    """The factors (each in (0, 1]) by which the linear and the angular part of ``twist`` must be scaled
+    so that no axis exceeds its limit (m/s, rad/s) and the linear part's norm does not exceed
+    ``tcp_mps`` (m/s)."""
+    t = np.asarray(twist, dtype=float)
+    peak_lin, peak_ang = float(np.max(np.abs(t[:3]))), float(np.max(np.abs(t[3:])))
     speed = float(np.linalg.norm(t[:3]))
-    if speed > tcp_mps:
-        t[:3] *= tcp_mps / speed
+    lin = min(1.0, linear_mps / peak_lin if peak_lin > linear_mps else 1.0, tcp_mps / speed if speed > tcp_mps else 1.0)
+    return lin, (angular_radps / peak_ang if peak_ang > angular_radps else 1.0)
+
+
+def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float, tcp_mps: float = math.inf) -> FloatArray:
+    """``twist`` with each part scaled by its :func:`speed_scales` factor, keeping each part's direction."""
+    t = np.array(twist, dtype=float)
+    lin, ang = speed_scales(t, linear_mps, angular_radps, tcp_mps)
+    if lin < 1.0:
+        t[:3] *= lin
+    if ang < 1.0:
+        t[3:] *= ang
     return t
 
 

@@ -63,7 +63,7 @@ def start_components(d: Daemon) -> None:
         path = opts.record.replace("{time}", time.strftime("%Y%m%d-%H%M%S"))
         try:
             d.recorder = Recorder(path, cfg.record.flush_s, on_error=lambda text: record_error(d, text),
-                                  json_topics=viz_json_topics())
+                                  json_topics=_viz_json_topics())
         except OSError as e:
             raise OSError(f"record.path (--record) {path}: cannot write: {e.strerror or e}") from None
     start_viz(d)
@@ -83,13 +83,12 @@ def start_components(d: Daemon) -> None:
         d.sim.begin()
 
 
-def viz_json_topics() -> dict:
-    """The JSON topics of the live view a recording carries too (with their schemas)."""
-    from ..viz.messages import (
-        BELIEF_SCHEMA,  # (imports the Foxglove SDK: only when it is used)
-    )
+def _viz_json_topics() -> dict:
+    """The live view's JSON topics, which a recording carries too (imported here: the module imports the
+    Foxglove SDK, only when it is used)."""
+    from ..viz.messages import JSON_TOPICS
 
-    return {"/belief": BELIEF_SCHEMA}
+    return JSON_TOPICS
 
 
 def start_viz(d: Daemon) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 import foxglove
 from foxglove.channels import LogChannel, SceneUpdateChannel
 
-from .messages import BELIEF_SCHEMA
+from .messages import JSON_TOPICS
 
 HOST = "127.0.0.1"
 """The only interface the live view listens on (reach it from elsewhere through an SSH tunnel)."""
@@ -41,7 +41,7 @@ class LiveView:
             raise OSError(f"foxglove.port {port}: cannot serve the live view on {HOST}: {e}") from None
         self._channels: dict[str, Any] = {
             "/scene": SceneUpdateChannel("/scene", context=self._ctx),
-            "/belief": foxglove.Channel("/belief", schema=BELIEF_SCHEMA, context=self._ctx),
+            **{topic: foxglove.Channel(topic, schema=schema, context=self._ctx) for topic, schema in JSON_TOPICS.items()},
             "/log": LogChannel("/log", context=self._ctx),
         }
         self._closed = False

@@ -70,6 +70,9 @@ BELIEF_SCHEMA: dict[str, Any] = {
     },
 }
 
+JSON_TOPICS: dict[str, dict[str, Any]] = {"/belief": BELIEF_SCHEMA}
+"""The live view's JSON topics and their schemas (the live server and every recording carry them)."""
+
 _OBJECT_GREY = (0.62, 0.62, 0.62)
 _OBJECT_HOT = (1.0, 0.55, 0.1)
 _LOW = (0.25, 0.45, 0.95)
