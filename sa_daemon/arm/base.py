@@ -61,7 +61,7 @@ def speed_scales(twist: FloatArray, linear_mps: float, angular_radps: float, tcp
     t = np.asarray(twist, dtype=float)
     peak_lin, peak_ang = float(np.max(np.abs(t[:3]))), float(np.max(np.abs(t[3:])))
     speed = float(np.linalg.norm(t[:3]))
-    lin = min(1.0, linear_mps / peak_lin if peak_lin > linear_mps else 1.0, tcp_mps / speed if speed > tcp_mps else 1.0)
+    lin = min(linear_mps / peak_lin if peak_lin > linear_mps else 1.0, tcp_mps / speed if speed > tcp_mps else 1.0)
     return lin, (angular_radps / peak_ang if peak_ang > angular_radps else 1.0)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
-from ..world.goals import Goal
+from ..world.goals import Goal, target_object
 from ..world.goalset import GoalSet
 from .huber import q_minus_v
 
@@ -167,8 +167,8 @@ class Belief:
 
     def siblings(self, target: str) -> list[str]:
         """The other targets (grasp types) of ``target``'s object."""
-        obj = target.split(":", 1)[0]
-        return [t for t in self.goals.targets if t != target and t.split(":", 1)[0] == obj]
+        obj = target_object(target)
+        return [t for t in self.goals.targets if t != target and target_object(t) == obj]
 
     def after_other_grasp(self, target: str, cfg: IntentConfig) -> Belief:
         """The third answer to "is ``target`` your goal?": "yes, that object, but another grasp" (section

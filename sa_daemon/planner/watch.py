@@ -43,6 +43,7 @@ import numpy as np
 from ..geometry import FloatArray
 from ..model.actions import Action, ActionKind
 from ..model.model import SharedAutonomyModel
+from ..world.goals import target_object
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
 
@@ -92,7 +93,7 @@ class WatchSearch:
         self.L_yes = np.where(in_t, p, 1.0 - p)
         self.third = cfg.asking.third_answer
         if self.third:  # "yes, that object, but another grasp" (asking.third_answer; docs/model.md)
-            qobj = np.array([q.target.split(":", 1)[0] for q in self.questions])
+            qobj = np.array([target_object(q.target) for q in self.questions])
             gobj = np.array([g.object for g in goals.goals])
             self.asked_mask = in_t
             self.sib = (qobj[:, None] == gobj[None, :]) & ~in_t  # the asked object's other grasps

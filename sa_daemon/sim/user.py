@@ -28,6 +28,7 @@ from ..config import InputConfig, SimUserConfig
 from ..geometry import FloatArray, Pose, quat_angle, rotation_error
 from ..model.actions import Mode
 from ..model.twists import axes_to_twist
+from ..world.goals import target_object
 
 
 class Phase(str, Enum):
@@ -241,6 +242,6 @@ class SimulatedUser:
         truth = target == self.task
         if self.cfg.answer_error_rate > 0.0 and self.rng.random() < self.cfg.answer_error_rate:
             return not truth
-        if third and not truth and target.split(":", 1)[0] == str(self.task).split(":", 1)[0]:
+        if third and not truth and target_object(target) == target_object(str(self.task)):
             return "other"
         return truth

@@ -3,8 +3,9 @@
 The process (``sa-voice``) reads its :mod:`.audio` source all the time, cuts utterances, and
 recognises only those that lie inside the listening window the daemon opened for the pending
 question: from ``after_speech_s`` after the robot finished speaking the question until ``listen_s``
-later, with the answers that question takes (yes/no, and "other grasp" with ``asking.third_answer``). Speech that started before the window opened (the robot's own voice, its echo) and anything
-while no window is open is dropped without decoding, so the robot never answers itself. Decoding
+later, with the answers that question takes (yes/no, and "other grasp" with ``asking.third_answer``).
+Speech that started before the window opened (the robot's own voice, its echo) and anything while no
+window is open is dropped without decoding, so the robot never answers itself. Decoding
 (up to 0.4 s) runs in this process, never on the daemon's event loop or under its interpreter lock.
 
 Messages on the pipe: daemon -> process ``("listen", qid, t_open, t_close, third)`` (monotonic s; ``third``:

@@ -51,12 +51,17 @@ def parse_target(text: str) -> tuple[str, GraspType]:
         raise ValueError(f"task {text!r}: unknown grasp type {kind!r} (one of {names})") from None
 
 
+def target_object(target: str) -> str:
+    """The object of a target name: ``"cup:top"`` -> ``"cup"`` (a name without a grasp type is its object)."""
+    return target.partition(":")[0]
+
+
 def object_probabilities(target_probabilities: Mapping[str, float]) -> dict[str, float]:
     """The belief summed per object: ``{"cup": p(cup:top) + p(cup:side), ...}`` from target probabilities
     keyed ``"object:grasp_type"`` (in their order of first appearance)."""
     out: dict[str, float] = {}
     for target, p in target_probabilities.items():
-        obj = target.rpartition(":")[0]
+        obj = target_object(target)
         out[obj] = out.get(obj, 0.0) + float(p)
     return out
 
