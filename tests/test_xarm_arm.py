@@ -452,6 +452,74 @@ def test_close_is_idempotent_and_leaves_a_zero_command(arm, fake):
     assert not arm.status()["connected"]
 
 
+def _hold(fake: FakeXArmAPI, name: str) -> tuple[threading.Event, threading.Event]:
+    """Make the fake's ``name`` wait for ``release`` (a slow reply, not a failed one); ``entered`` is set
+    when a call has reached it."""
+    entered, release = threading.Event(), threading.Event()
+    original = getattr(fake, name)
+
+    def slow(*args, **kwargs):
+        entered.set()
+        release.wait(WAIT_S)
+        return original(*args, **kwargs)
+
+    setattr(fake, name, slow)
+    return entered, release
+
+
+def test_halt_waits_for_a_moving_command_in_flight_then_only_zeros_are_sent(arm, fake):
+    """The daemon's stop: nothing moving may reach the controller after ``halt`` returns. A moving command
+    already in the SDK's hands is waited for; later moving commands are refused; the zero follows."""
+    entered, release = _hold(fake, VC)
+    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))
+    assert entered.wait(WAIT_S)
+    threading.Timer(0.05, release.set).start()
+    t0 = time.monotonic()
+    assert arm.halt(timeout_s=WAIT_S)
+    waited = time.monotonic() - t0
+    assert waited >= 0.04 and release.is_set()  # returned only once the moving command had its reply
+    assert vc_calls(fake)[0].args[0][0] == pytest.approx(50.0)  # the one in flight (mm/s)
+    dropped = arm.status()["twists_dropped"]
+    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))  # refused from now on
+    arm.command_twist(np.zeros(6))  # accepted
+    assert arm.status()["twists_dropped"] == dropped + 1
+    assert fake.wait_for_calls(VC, 2, WAIT_S)
+    sync(fake)
+    assert all(c.args[0] == [0.0] * 6 for c in vc_calls(fake)[1:])
+    assert not np.any(fake.speed)
+
+
+def test_halt_drops_a_moving_command_taken_but_not_yet_sent(arm, fake):
+    """The I/O thread has taken a twist with a gripper request and is busy with the gripper when the halt
+    comes: the twist it holds is moving, so it is never sent."""
+    poll_in, poll_out = _hold(fake, "get_position")
+    assert poll_in.wait(WAIT_S)  # the I/O thread is inside a poll: both requests below wait for it
+    grip_in, grip_out = _hold(fake, "set_gripper_position")
+    arm.command_gripper(True)
+    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))
+    del fake.get_position
+    poll_out.set()
+    assert grip_in.wait(WAIT_S)  # now in the gripper call, the twist taken with it
+    assert arm.halt(timeout_s=WAIT_S)  # nothing moving is in the SDK's hands: at once
+    grip_out.set()
+    del fake.set_gripper_position
+    assert fake.wait_for_calls(VC, 1, WAIT_S)
+    sync(fake)
+    assert all(c.args[0] == [0.0] * 6 for c in vc_calls(fake))
+
+
+def test_halt_gives_up_after_its_timeout_when_the_sdk_hangs_in_a_moving_command(arm, fake):
+    entered, release = _hold(fake, VC)
+    arm.command_twist(np.array([0.05, 0, 0, 0, 0, 0]))
+    assert entered.wait(WAIT_S)
+    t0 = time.monotonic()
+    assert arm.halt(timeout_s=0.05) is False
+    assert 0.04 <= time.monotonic() - t0 < 1.0
+    release.set()
+    assert fake.wait_for_calls(VC, 2, WAIT_S)  # the zero follows the hung command once it returns
+    assert vc_calls(fake)[-1].args[0] == [0.0] * 6
+
+
 def test_close_while_the_sdk_hangs_returns(arm, fake):
     fake.hang(0.5)
     assert fake.wait_for_blocked(WAIT_S)

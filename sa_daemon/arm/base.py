@@ -102,6 +102,13 @@ class Arm(abc.ABC):
     def command_gripper(self, closed: bool) -> None:
         """Close (``True``) or open the gripper."""
 
+    def halt(self, timeout_s: float = 0.1) -> bool:
+        """Stop for good before :meth:`close`: command zero, refuse moving commands from now on, and return
+        ``True`` once no moving command can still reach the arm (``False`` if one was still in flight after
+        ``timeout_s`` s). A stepped arm has nothing in flight; an arm with an I/O thread overrides this."""
+        self.command_twist(np.zeros(6))
+        return True
+
     def step(self, dt: float) -> None:
         """Advance a simulated arm by ``dt`` s under the held command (no-op for a real arm)."""
 

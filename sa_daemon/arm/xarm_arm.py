@@ -196,6 +196,8 @@ class XArm(Arm):
         self._period_s = 1.0 / self.rate_hz
 
         self._cv = threading.Condition()
+        # Held by the I/O thread across each velocity command's SDK call, so halt() can wait for one in flight.
+        self._sending = threading.Lock()
         # Shared with the callers and the SDK's callback thread; guarded by _cv, never held in an SDK call.
         self._closing = False
         self._connected = False
@@ -205,6 +207,7 @@ class XArm(Arm):
         self._gripper_req: bool | None = None
         self._reset_req = False
         self._zero_req = False
+        self._halted = False  # set by halt(): only zeros are sent from then on
         self._link_lost_req: str | None = None
         self._pose: Pose | None = None
         self._joints: FloatArray | None = None
@@ -274,11 +277,25 @@ class XArm(Arm):
             raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
         speeds = twist_to_speeds(limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps))
         with self._cv:
-            if self._fault is not None or self._closing:
+            if self._fault is not None or self._closing or (self._halted and any(speeds)):
                 self._stats["twists_dropped"] += 1
                 return
             self._twist = (speeds, time.monotonic())
             self._cv.notify_all()
+
+    def halt(self, timeout_s: float = 0.1) -> bool:
+        """Stop for good: a zero is queued, moving commands are refused from now on (also one the I/O thread
+        has taken but not sent yet), and this returns once a moving command already in the SDK's hands has
+        had its reply, or after ``timeout_s`` s (then ``False``). The zero follows on the I/O thread."""
+        with self._cv:
+            self._halted = True
+            self._twist = None
+            self._zero_req = True
+            self._cv.notify_all()
+        if not self._sending.acquire(timeout=timeout_s):
+            return False
+        self._sending.release()
+        return True
 
     def command_gripper(self, closed: bool) -> None:
         """Close (position 0) or open (850) the gripper, from the I/O thread; ignored while faulted."""
@@ -434,10 +451,11 @@ class XArm(Arm):
         if w.gripper is not None:
             self._send_gripper(w.gripper)
         if w.twist is not None:
-            with self._cv:
-                stale = self._fault is not None  # latched after the twist was taken
-            if not stale:
-                self._send(*w.twist)
+            with self._sending:
+                with self._cv:  # a fault latched, or a halt, after the twist was taken
+                    stale = self._fault is not None or (self._halted and any(w.twist[0]))
+                if not stale:
+                    self._send(*w.twist)
 
     def _call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         """One SDK call; raises ``_LinkLost`` on an exception or a code of -1 or 3."""

@@ -59,6 +59,8 @@ log = logging.getLogger("sa_daemon")
 
 STATS_KEEP = 20000
 """Latency and tick-work samples kept for percentiles (200 s at 100 Hz)."""
+STOP_WAIT_S = 0.1
+"""How long a stop waits for a velocity command already in the arm driver's hands to be answered (s)."""
 
 
 class Daemon:
@@ -337,8 +339,10 @@ class Daemon:
     def request_stop(self, reason: str) -> None:
         if self._stop_event is not None and not self._stop_event.is_set():
             self.ctl.stop()  # from now on every control tick commands zero, until the arm closes
-            if self.arm is not None:  # and a moving command still waiting for the arm's I/O is replaced now
-                self.arm.command_twist(np.zeros(6))
+            # A moving command not yet sent is dropped, one in flight waited for.
+            if self.arm is not None and not self.arm.halt(STOP_WAIT_S):
+                log.warning("stopping: a velocity command was still in flight to the arm after %.2f s; "
+                                "the zero follows it", STOP_WAIT_S)
             self.event("shutdown", reason=reason)
             self._stop_event.set()
 
