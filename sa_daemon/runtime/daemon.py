@@ -342,7 +342,7 @@ class Daemon:
             # A moving command not yet sent is dropped, one in flight waited for.
             if self.arm is not None and not self.arm.halt(STOP_WAIT_S):
                 log.warning("stopping: a velocity command was still in flight to the arm after %.2f s; "
-                                "the zero follows it", STOP_WAIT_S)
+                            "the zero follows it", STOP_WAIT_S)
             self.event("shutdown", reason=reason)
             self._stop_event.set()
 
