@@ -32,9 +32,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from ..sim.evaluate import (
         TrialSpec,
         compare,
+        earlier_trials,
         format_summary,
         run_trials,
         summarise,
+        trial_key,
         write_results,
     )
     from ..sim.suites import SuitePart, suite
@@ -58,18 +60,35 @@ def cmd_eval(args: argparse.Namespace) -> int:
             parse_target(t)
             scene.goal(t)
     seeds = args.seeds or (suite(args.suite).seeds if args.suite else 5)
+    if args.first_seed < 0:
+        raise ConfigError("eval: --first-seed must be >= 0")
     specs = [TrialSpec(p.scene, t, m, seed, u) for p in parts for t in p.tasks for u in users for m in p.methods
-             for seed in range(seeds)]
+             for seed in range(args.first_seed, args.first_seed + seeds)]
+    earlier: list[dict] = []
+    for path in args.merge or []:
+        earlier += earlier_trials(path, cfg, args.arm)
+    if earlier:
+        names = {p.scene: load_scene(p.scene).name for p in parts}
+        new = {(names[s.scene], s.task, load_user(s.user).name, s.method, s.seed) for s in specs}
+        twice, seen = [], set(new)
+        for key in map(trial_key, earlier):
+            if key in seen:
+                twice.append(key)
+            seen.add(key)
+        if twice:
+            raise ConfigError(f"eval --merge: {len(twice)} trials measured twice, e.g. {min(twice)}")
     plots = Path(args.plots) if args.plots else None
     trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots, arm=args.arm,
                         backend=args.backend, address=args.address)
+    speed = trials.speed
+    trials = earlier + list(trials)
     summary = summarise(trials)
     comparisons = compare(trials)
     print(format_summary(summary, comparisons=comparisons))
     print("stars: policy differs from that method on that metric (paired Wilcoxon over seeds, Holm per task"
           " and user: * p<0.05 ** p<0.01 *** p<0.001 **** p<0.0001)")
-    if trials.speed is not None:
-        print(trials.speed.line())
+    if speed is not None:
+        print(speed.line())
     if plots is not None:
         from ..sim.plots import plot_summary_bars
 
@@ -83,7 +102,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.json:
         meta = {"suite": args.suite, "scenes": [load_scene(p.scene).name for p in parts],
                 "parts": [{"scene": p.scene, "tasks": list(p.tasks), "methods": list(p.methods)} for p in parts],
-                "users": users, "seeds": seeds, "arm": args.arm, "config": cfg.model_dump(mode="json")}
+                "users": list(dict.fromkeys([*(t["user"] for t in earlier), *users])),
+                "seeds": len({t["seed"] for t in trials}), "arm": args.arm, "config": cfg.model_dump(mode="json")}
+        if args.merge:
+            meta["merged"] = list(args.merge)
         if len(parts) == 1:  # the single-scene keys older files have (docs/results/rerun.py reads either)
             meta.update(scene=meta["scenes"][0], tasks=list(parts[0].tasks), methods=list(parts[0].methods))
         write_results(args.json, trials, summary, meta, comparisons)
@@ -165,6 +187,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"simulated user profile, repeatable (built-in: {', '.join(builtin_user_names())}; default calibrated)")
     e.add_argument("--seeds", type=int, help="seeds per cell (default 5; with --suite the suite's: 10, table1 20, "
                    "enough for a paired test to reach p < 0.05 after the Holm correction)")
+    e.add_argument("--first-seed", type=int, default=0, help="seeds run from this one (default 0): extend an "
+                   "earlier run with more seeds, then --merge it")
+    e.add_argument("--merge", action="append", metavar="JSON",
+                   help="an earlier --json run of the same config and arm whose trials join this run's before the "
+                   "summary and the paired tests (repeatable; a trial measured twice is refused)")
     e.add_argument("--json", help="write trials and summary to this file")
     e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
     e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)

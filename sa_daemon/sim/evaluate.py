@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..config import Config
+from ..config import Config, ConfigError
 from ..world.scene import load_scene
 from . import stats
 from .episode import arm_factory, run_trial
@@ -288,3 +288,36 @@ def write_results(path: str | Path, trials: list[dict], summary: list[dict], met
     p.parent.mkdir(parents=True, exist_ok=True)
     data = {"meta": meta, "trials": trials, "summary": summary, "comparisons": comparisons or []}
     p.write_text(json.dumps(data, indent=2) + "\n")
+
+
+def trial_key(t: dict) -> tuple[str, str, str, str, int]:
+    """What identifies a trial across files: (scene, task, user, method, seed)."""
+    return (t["scene"], t["task"], t["user"], t["method"], int(t["seed"]))
+
+
+def _first_difference(a: object, b: object, path: str = "") -> str | None:
+    """The dotted path of the first key where two config dumps differ (``None`` if equal)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            d = _first_difference(a.get(k), b.get(k), f"{path}{k}.")
+            if d is not None:
+                return d
+        return None
+    return None if a == b else path.rstrip(".")
+
+
+def earlier_trials(path: str | Path, cfg: Config, arm: str) -> list[dict]:
+    """The trials of an earlier ``--json`` run to merge with this one (``eval --merge``), refused with a
+    ``ConfigError`` naming the first config key that differs, or a different arm backend: a merged
+    evaluation must measure one thing. Wall times are not kept."""
+    try:
+        data = json.loads(Path(path).read_text())
+        meta, trials = data["meta"], data["trials"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ConfigError(f"eval --merge {path}: not an evaluation's JSON ({e})") from None
+    diff = _first_difference(meta.get("config"), cfg.model_dump(mode="json"))
+    if diff is not None:
+        raise ConfigError(f"eval --merge {path}: measured with another config (first difference: {diff})")
+    if meta.get("arm") != arm:
+        raise ConfigError(f"eval --merge {path}: measured on the {meta.get('arm')} arm, this run on {arm}")
+    return [{k: v for k, v in t.items() if k != "wall_s"} for t in trials]
