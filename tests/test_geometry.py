@@ -52,11 +52,42 @@ def test_quat_mul_matches_scipy_composition():
         assert same_rotation(g, w)
 
 
+@pytest.mark.parametrize("shape_a, shape_b", [
+    ((18, 4), (50, 12, 1, 4)),  # a set against many: one matrix product
+    ((50, 12, 1, 4), (18, 4)),  # the set on the right: broadcast, component by component (large)
+    ((3, 4), (3, 4)),  # small: outer product
+    ((200, 18, 4), (18, 4)),  # large, elementwise: component by component
+    ((1, 4), (7, 1, 4)),  # a set of one: not the set path
+])
+def test_quat_mul_and_quat_angle_are_the_same_product_whichever_way_they_compute(shape_a, shape_b):
+    """quat_mul picks a matrix product, an outer product or component-wise arithmetic by shape; every
+    way equals scipy's composition of the broadcast pairs, and quat_angle its geodesic angle."""
+    a = RNG.normal(size=shape_a)
+    b = RNG.normal(size=shape_b)
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    got = quat_mul(a, b)
+    A, B = np.broadcast_arrays(a, b)
+    assert got.shape == A.shape
+    want = (scipy_rot(A.reshape(-1, 4)) * scipy_rot(B.reshape(-1, 4))).as_quat(scalar_first=True)
+    sign = np.sign(np.sum(got.reshape(-1, 4) * want, axis=-1, keepdims=True))
+    np.testing.assert_allclose(got.reshape(-1, 4), sign * want, atol=1e-12)
+    angle = (scipy_rot(A.reshape(-1, 4)).inv() * scipy_rot(B.reshape(-1, 4))).magnitude()
+    np.testing.assert_allclose(quat_angle(a, b).reshape(-1), angle, atol=1e-6)
+    np.testing.assert_allclose(quat_angle(b, a).reshape(-1), angle, atol=1e-6)
+
+
 def test_quat_to_rotvec_matches_scipy():
     q = random_quats(50)
     got = quat_to_rotvec(q)
     want = scipy_rot(q).as_rotvec()  # scipy also takes the short way (angle <= pi)
     np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_quat_to_rotvec_takes_the_short_way_for_q_and_minus_q():
+    q = random_quats(200)
+    np.testing.assert_allclose(quat_to_rotvec(-q), quat_to_rotvec(q), atol=1e-12)
+    assert np.all(np.linalg.norm(quat_to_rotvec(q), axis=-1) <= math.pi + 1e-12)
 
 
 def test_rotvec_to_quat_matches_scipy_and_handles_zero():

@@ -20,7 +20,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import HOConfig, HuberConfig, IntentConfig
-from ..geometry import FloatArray, integrate_pose, quat_angle, rotation_error, turn
+from ..geometry import (
+    FloatArray,
+    integrate_pose,
+    norms,
+    quat_angle,
+    rotation_error,
+    turn,
+)
 
 
 def huber_value(d: FloatArray, h: HuberConfig) -> FloatArray:
@@ -106,15 +113,15 @@ def q_minus_v_driven(
     if user_angular is None:
         p = np.asarray(position)[..., None, :]
         u = np.asarray(user_linear)[..., None, :]
-        d = np.sqrt(np.sum((goal_positions - p) ** 2, axis=-1))
-        d1 = np.sqrt(np.sum((goal_positions - (p + u * T)) ** 2, axis=-1))
-        h, speed = cfg.translation, np.sqrt(np.sum(u * u, axis=-1))
+        d = norms(goal_positions - p)
+        d1 = norms(goal_positions - (p + u * T))
+        h, speed = cfg.translation, norms(u)
     else:
         q = np.asarray(quat)[..., None, :]
         w = np.asarray(user_angular)[..., None, :]
         d = quat_angle(goal_quats, q)
         d1 = quat_angle(goal_quats, turn(q, w, T))
-        h, speed = cfg.rotation, np.sqrt(np.sum(w * w, axis=-1))
+        h, speed = cfg.rotation, norms(w)
     return T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
-from ..geometry import FloatArray, integrate_pose, quat_to_matrix, rotation_error
+from ..geometry import FloatArray, integrate_pose, norms, quat_to_matrix, rotation_error
 from .actions import Mode
 from .huber import (
     assistance_angular,
@@ -49,7 +49,7 @@ def axes_to_twist(axes: FloatArray, mode: Mode, scale: InputConfig) -> FloatArra
 
 def clip_norm(v: FloatArray, limit: float) -> FloatArray:
     """``v`` scaled down, along its last axis, to a norm of at most ``limit``."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = norms(v)[..., None]
     return v * np.minimum(1.0, limit / np.maximum(n, 1e-12))
 
 
@@ -118,7 +118,7 @@ def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cf
     w = _goal_weights(weights)
     if cfg.ho.generator == "gradient":
         return np.sum(w * assistance_angular(quat[..., None, :], goal_quats, cfg.intent, cfg.ho), axis=-2)
-    error = np.sum(w * rotation_error(goal_quats, np.asarray(quat)[..., None, :]), axis=-2)
+    error = np.einsum("...g,...gj->...j", w[..., 0], rotation_error(goal_quats, np.asarray(quat)[..., None, :]))
     return clip_norm(cfg.move.angular_gain * error, cfg.move.angular_max_radps)
 
 
@@ -133,7 +133,7 @@ def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: Float
     heading to ``goal_position`` aims at its ``pregrasp`` point while farther than 1.5 ``standoff_m`` from
     the goal, then at the goal, at its ``speed`` (m/s), slowing within one second of its aim (gain 1/s,
     saturated at the speed). Broadcasts like :func:`move_twist`."""
-    far = np.linalg.norm(np.asarray(goal_position) - position, axis=-1, keepdims=True) > 1.5 * standoff_m
+    far = norms(np.asarray(goal_position) - position)[..., None] > 1.5 * standoff_m
     return clip_norm(np.where(far, pregrasp, goal_position) - position, speed)
 
 

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Config
-from ..geometry import FloatArray, quat_angle, turn
+from ..geometry import FloatArray, norms, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_driven
 from ..model.reward import distance_reward, opposes
@@ -100,12 +100,12 @@ class Rollouts:
 
         def reward_at() -> tuple[FloatArray, FloatArray]:
             """(R_d without the bonus, reached) of every rollout's own goal at its pose, ``(C, G, A)``."""
-            d_t = np.sqrt(np.sum((P - gp) ** 2, axis=-1))
+            d_t = norms(P - gp)
             d_r = quat_angle(Q, gq)
             if tracked and translating:
                 d_r[:, :, h] = quat_angle(free, kq)
             elif tracked:
-                d_t[:, :, h] = np.sqrt(np.sum((free - kp) ** 2, axis=-1))
+                d_t[:, :, h] = norms(free - kp)
             reached = (d_t <= cfg.reward.goal_translation_m) & (d_r <= cfg.reward.goal_rotation_rad)
             return distance_reward(d_t, d_r, cfg.reward) - np.where(reached, cfg.reward.goal, 0.0), reached
 
