@@ -36,7 +36,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
         format_summary,
         run_trials,
         summarise,
-        trial_key,
         write_results,
     )
     from ..sim.suites import SuitePart, suite
@@ -64,19 +63,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise ConfigError("eval: --first-seed must be >= 0")
     specs = [TrialSpec(p.scene, t, m, seed, u) for p in parts for t in p.tasks for u in users for m in p.methods
              for seed in range(args.first_seed, args.first_seed + seeds)]
-    earlier: list[dict] = []
-    for path in args.merge or []:
-        earlier += earlier_trials(path, cfg, args.arm)
-    if earlier:
-        names = {p.scene: load_scene(p.scene).name for p in parts}
-        new = {(names[s.scene], s.task, load_user(s.user).name, s.method, s.seed) for s in specs}
-        twice, seen = [], set(new)
-        for key in map(trial_key, earlier):
-            if key in seen:
-                twice.append(key)
-            seen.add(key)
-        if twice:
-            raise ConfigError(f"eval --merge: {len(twice)} trials measured twice, e.g. {min(twice)}")
+    earlier = earlier_trials(args.merge or [], cfg, args.arm, specs)
     plots = Path(args.plots) if args.plots else None
     trials = run_trials(specs, cfg, jobs=args.jobs, progress=not args.quiet, plots=plots, arm=args.arm,
                         backend=args.backend, address=args.address)

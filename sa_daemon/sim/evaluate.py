@@ -306,10 +306,20 @@ def _first_difference(a: object, b: object, path: str = "") -> str | None:
     return None if a == b else path.rstrip(".")
 
 
-def earlier_trials(path: str | Path, cfg: Config, arm: str) -> list[dict]:
-    """The trials of an earlier ``--json`` run to merge with this one (``eval --merge``), refused with a
-    ``ConfigError`` naming the first config key that differs, or a different arm backend: a merged
-    evaluation must measure one thing. Wall times are not kept."""
+@lru_cache(maxsize=64)
+def _scene_name(scene: str) -> str:
+    return load_scene(scene).name
+
+
+def spec_key(spec: TrialSpec) -> tuple[str, str, str, str, int]:
+    """The ``trial_key`` the trial of ``spec`` will have once run."""
+    return (_scene_name(spec.scene), spec.task, _profile(spec.user).name, spec.method, spec.seed)
+
+
+def _trials_of(path: str | Path, cfg: Config, arm: str) -> list[dict]:
+    """The trials of one earlier ``--json`` run, refused with a ``ConfigError`` naming the first config key
+    that differs, or a different arm backend: a merged evaluation must measure one thing. Wall times are not
+    kept."""
     try:
         data = json.loads(Path(path).read_text())
         meta, trials = data["meta"], data["trials"]
@@ -321,3 +331,21 @@ def earlier_trials(path: str | Path, cfg: Config, arm: str) -> list[dict]:
     if meta.get("arm") != arm:
         raise ConfigError(f"eval --merge {path}: measured on the {meta.get('arm')} arm, this run on {arm}")
     return [{k: v for k, v in t.items() if k != "wall_s"} for t in trials]
+
+
+def earlier_trials(paths: Iterable[str | Path], cfg: Config, arm: str, specs: Iterable[TrialSpec]) -> list[dict]:
+    """The trials of earlier ``--json`` runs to merge with the run of ``specs`` (``eval --merge``), checked
+    before anything runs: each file measured with ``cfg`` on ``arm`` (see ``_trials_of``), and no trial
+    measured twice, across the files or by ``specs``."""
+    earlier = [t for path in paths for t in _trials_of(path, cfg, arm)]
+    if not earlier:
+        return earlier
+    seen = {spec_key(s) for s in specs}
+    twice = []
+    for key in map(trial_key, earlier):
+        if key in seen:
+            twice.append(key)
+        seen.add(key)
+    if twice:
+        raise ConfigError(f"eval --merge: {len(twice)} trials measured twice, e.g. {min(twice)}")
+    return earlier
