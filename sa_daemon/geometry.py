@@ -186,7 +186,7 @@ def turn(quat_wxyz: ArrayLike, angular: ArrayLike, dt: float) -> FloatArray:
     """The orientation part of :func:`integrate_pose`: ``exp(w dt) q`` for a base-frame angular velocity
     ``w`` (rad/s) applied for ``dt`` seconds, renormalised. Broadcasts over leading axes."""
     q = quat_mul(rotvec_to_quat(np.asarray(angular, dtype=float) * dt), quat_wxyz)
-    return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    return q / norms(q)[..., None]
 
 
 def rotation_error(target_quat_wxyz: ArrayLike, quat_wxyz: ArrayLike) -> FloatArray:

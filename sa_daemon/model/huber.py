@@ -82,14 +82,14 @@ def q_minus_v_at(
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]
     diff = goal_positions - position
-    d_t = np.sqrt(np.sum(diff * diff, axis=-1))
+    d_t = norms(diff)
     d_r = quat_angle(goal_quats, quat)
     v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
     p1, q1 = integrate_pose(position, quat, u, T)
-    d_t1 = np.sqrt(np.sum((goal_positions - p1) ** 2, axis=-1))
+    d_t1 = norms(goal_positions - p1)
     d_r1 = quat_angle(goal_quats, q1)
     if cfg.step_cost == "path":
-        per_t, per_r = np.sqrt(np.sum(u[..., :3] ** 2, axis=-1)), np.sqrt(np.sum(u[..., 3:] ** 2, axis=-1))
+        per_t, per_r = norms(u[..., :3]), norms(u[..., 3:])
     else:
         per_t = per_r = 1.0
     cost = T * (huber_slope(d_t, cfg.translation) * per_t + huber_slope(d_r, cfg.rotation) * per_r)
@@ -142,7 +142,7 @@ def assistance_twists(
 def assistance_linear(position: FloatArray, goal_positions: FloatArray, intent: IntentConfig, ho: HOConfig) -> FloatArray:
     """The linear part of :func:`assistance_twists` (m/s), broadcasting like it."""
     diff = goal_positions - position
-    d_t = np.sqrt(np.sum(diff * diff, axis=-1))
+    d_t = norms(diff)
     lin_mag = huber_slope(d_t, intent.translation) / ho.translation_cost_multiplier
     lin_mag = lin_mag * np.minimum(1.0, d_t / ho.translation_shrink_m) / np.maximum(d_t, 1e-12)
     return diff * lin_mag[..., None]
@@ -151,7 +151,7 @@ def assistance_linear(position: FloatArray, goal_positions: FloatArray, intent: 
 def assistance_angular(quat: FloatArray, goal_quats: FloatArray, intent: IntentConfig, ho: HOConfig) -> FloatArray:
     """The angular part of :func:`assistance_twists` (rad/s), broadcasting like it."""
     axis = rotation_error(goal_quats, quat)  # |axis| = d_r
-    d_r = np.sqrt(np.sum(axis * axis, axis=-1))
+    d_r = norms(axis)
     rot_mag = huber_slope(d_r, intent.rotation) / ho.rotation_cost_multiplier
     rot_mag = rot_mag * np.minimum(1.0, d_r / ho.rotation_shrink_rad) / np.maximum(d_r, 1e-12)
     return axis * rot_mag[..., None]
