@@ -585,3 +585,31 @@ def test_rationality_multiplies_the_log_odds_of_an_input(beta):
     nll = [beta * hand_q_minus_v_path(offset(), g, u) for g in positions]
     got = b.after_input(GRIPPER, np.r_[u, 0, 0, 0], PATH.model_copy(update={"rationality": beta}))
     np.testing.assert_allclose(got.probs, hand_update([0.5, 0.5], nll), atol=1e-12)
+
+
+def v_rot(d: float) -> float:
+    """The published rotation Huber value (c 0.20, delta pi/32, a 0.01, weight 0.07)."""
+    c, delta, a = 0.20, math.pi / 32, 0.01
+    return 0.07 * (0.5 * (c / delta) * d * d + a * d if d <= delta else (c + a) * d - c * delta / 2)
+
+
+@pytest.mark.parametrize("rotation_beta", [1.0, 50.0])
+def test_rotation_rationality_weighs_rotation_input_alone(rotation_beta):
+    """``intent.rotation_rationality`` is the MaxEnt IOC ``beta`` of rotation-mode input and
+    ``rationality`` that of translation: two grasps at the gripper's position, 0.5 rad either way about
+    the base z axis; one sample turning 0.3 rad/s toward the first gives log-odds ``beta_r (Q_B - V_B)``
+    by hand (the first's ``Q - V`` is 0: a turn straight at it in Huber's linear zone), and a translation
+    sample's log-odds do not depend on ``beta_r``."""
+    cfg = PATH.model_copy(update={"rotation_rationality": rotation_beta})
+    pos = [0.30, 0.0, 0.20]
+    turned = [Goal("cup", GraspType.TOP, (Pose.from_rpy(pos, (math.pi, 0.0, yaw)),)) for yaw in (0.5, -0.5)]
+    b = Belief.from_probs(GoalSet(tuple(turned)), np.array([0.5, 0.5]))
+    w = 0.3
+    nll_b = T * (0.07 * 0.21) * w + v_rot(0.5 + w * T) - v_rot(0.5)
+    got = b.after_input(GRIPPER, np.array([0, 0, 0, 0, 0, w]), cfg).probs
+    assert math.log(got[0] / got[1]) == pytest.approx(rotation_beta * nll_b, rel=1e-9)
+    b2, positions = two_goal_belief()
+    u = [0.03, 0.02, 0.0]
+    nll = [hand_q_minus_v_path(offset(), g, u) for g in positions]
+    np.testing.assert_allclose(b2.after_input(GRIPPER, np.r_[u, 0, 0, 0], cfg).probs, hand_update([0.5, 0.5], nll),
+                               atol=1e-12)

@@ -251,7 +251,7 @@ def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitme
 def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, dt):
     """One HO rollout for a user heading to goal ``g``, one step at a time: HO's belief starts at ``b0``
     and after every step takes the tracker's MaxEnt IOC update for that step's predicted input
-    (``belief_hz x dt`` samples, rationality ``beta``). Returns the pose after ``steps`` and the belief."""
+    (``belief_hz x dt`` samples, rationality ``beta``, the rotation part's ``rotation_rationality``). Returns the pose after ``steps`` and the belief."""
     log_b = np.log(b0)
     p, q = np.array(position, dtype=float), np.array(quat, dtype=float)
     standoff, alpha, T = cfg.planner.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s
@@ -263,19 +263,24 @@ def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, 
             u[3:] = user_angular(q, kq[g], speed[1])
         b = np.exp(log_b - log_b.max())
         robot = np.concatenate((ho_linear(p + u[:3] * T, kp, b, cfg), ho_angular(turn(q, u[3:], T), kq, b, cfg)))
-        log_b = log_b - cfg.runtime.belief_hz * dt * cfg.intent.rationality * q_minus_v_at(p, q, u, kp, kq, cfg.intent)
+        log_b = log_b - cfg.runtime.belief_hz * dt * cfg.intent.rationality * q_minus_v_at(
+            p, q, u, kp, kq, cfg.intent, cfg.intent.rotation_rationality / cfg.intent.rationality)
         twist = (1.0 - alpha) * u + alpha * robot
         p, q = p + twist[:3] * dt, turn(q, twist[3:], dt)
     b = np.exp(log_b - log_b.max())
     return p, q, b / b.sum()
 
 
+@pytest.mark.parametrize("rotation_beta", [None, 200.0])
 @pytest.mark.parametrize("mode, speed", [(Mode.TRANSLATION, (0.05, 0.0)), (Mode.ROTATION, (0.0, 0.3))])
-def test_ho_in_a_rollout_follows_the_belief_the_predicted_input_gives(mode, speed):
+def test_ho_in_a_rollout_follows_the_belief_the_predicted_input_gives(mode, speed, rotation_beta):
     """``planner.ho_belief = "tracked"`` (default): the batched rollouts move HO exactly as a plain loop
     that updates HO's belief after every step, for every goal the user may head to; and that belief
-    grows on the user's goal, so HO ends nearer it than HO under the plan's fixed belief does."""
+    grows on the user's goal, so HO ends nearer it than HO under the plan's fixed belief does. Also with
+    the rotation part of the evidence weighed apart (``intent.rotation_rationality``)."""
     cfg = _cfg()
+    if rotation_beta is not None:
+        cfg = cfg.model_copy(update={"intent": cfg.intent.model_copy(update={"rotation_rationality": rotation_beta})})
     snap = _snap()
     goals, pose, steps, dt = snap.goals, snap.pose, 4, 0.5
     kp, kq = goals.desired_poses(pose, cfg.intent.rotation_weight_m_per_rad)

@@ -6,9 +6,10 @@ With no assistance (method ``manual``) the arm goes where the simulated user dri
 so these trials measure the tracker without the planner. For every built-in user, every task of the suites
 (``sa_daemon.sim.suites``) and every seed, the tracker's target probabilities are read at each plan instant
 (0.1 s); the score is the mean of ``log p(true target)`` (a proper scoring rule: confident misreadings cost
-most), with the share of instants where the true target is the most likely and the worst trial's mean. Each
+most), with the share of instants where the true target is the most likely, the worst trial's mean, and the
+share of trials that end with the true target above 0.7 (the correct prediction of the paper's metric). Each
 ``--config`` is scored in turn (``-`` is the built-in defaults). ``docs/model.md`` ("The tracker") chose
-``intent.rationality`` with it.
+``intent.rationality`` and ``intent.rotation_rationality`` with it.
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ from sa_daemon.sim.users import builtin_user_names, load_user
 from sa_daemon.world.scene import load_scene
 
 
-def score_trial(job: tuple[str, str, str, str, int]) -> tuple[str, float, float]:
-    """``(task, mean log p(true target), share of instants the true target leads)`` of one manual trial."""
+def score_trial(job: tuple[str, str, str, str, int]) -> tuple[str, float, float, bool]:
+    """``(task, mean log p(true target), share of instants the true target leads, correct prediction at the
+    end)`` of one manual trial."""
     config, scene_name, task, user, seed = job
     cfg = load_user(user).apply(load_config(None if config == "-" else config))
     rows: list[tuple[float, bool]] = []
@@ -35,9 +37,9 @@ def score_trial(job: tuple[str, str, str, str, int]) -> tuple[str, float, float]
         tp = snap.goals.target_probabilities(snap.probs)
         rows.append((float(np.log(max(tp[task], 1e-6))), max(tp, key=tp.get) == task))
 
-    run_trial(load_scene(scene_name), task, "manual", seed, cfg, on_plan=on_plan, user_name=user)
+    trial = run_trial(load_scene(scene_name), task, "manual", seed, cfg, on_plan=on_plan, user_name=user)
     logp, lead = np.array(rows).T
-    return task, float(logp.mean()), float(lead.mean())
+    return task, float(logp.mean()), float(lead.mean()), trial.correct_prediction
 
 
 def main() -> None:
@@ -54,10 +56,13 @@ def main() -> None:
             res = list(pool.map(score_trial, jobs))
         logp = np.array([r[1] for r in res])
         print(f"{config}: {len(res)} manual trials; mean log p(true target) {logp.mean():.3f}, "
-              f"true target leads {np.mean([r[2] for r in res]):.3f}, worst trial {logp.min():.2f}")
+              f"true target leads {np.mean([r[2] for r in res]):.3f}, worst trial {logp.min():.2f}, "
+              f"correct prediction at the end {np.mean([r[3] for r in res]):.3f}")
+        print(f"    {'task':28s} {'log p':>7s} {'leads':>6s} {'pred':>5s}")
         for task in sorted({r[0] for r in res}):
             mine = [r for r in res if r[0] == task]
-            print(f"    {task:28s} {np.mean([r[1] for r in mine]):7.3f} {np.mean([r[2] for r in mine]):6.3f}")
+            print(f"    {task:28s} {np.mean([r[1] for r in mine]):7.3f} {np.mean([r[2] for r in mine]):6.3f}"
+                  f" {np.mean([r[3] for r in mine]):5.2f}")
 
 
 if __name__ == "__main__":

@@ -133,14 +133,15 @@ class Belief:
         return free if free.any() else None  # every target denied (a wrong answer): trust the joystick
 
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:
-        """MaxEnt IOC update from one joystick sample: ``log b(g) -= Q_g(x, u) - V_g(x)``.
+        """MaxEnt IOC update from one joystick sample: ``log b(g) -= beta (Q_g(x, u) - V_g(x))``, ``beta`` the
+        rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``).
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
         """
         u = _check_finite("user_twist", user_twist, (6,))
         nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
-                                          self.goals.quats_wxyz, cfg)
+                                          self.goals.quats_wxyz, cfg, cfg.rotation_rationality / cfg.rationality)
         free = self._competing()
         if free is None:
             return self._with(self._normalised(self.log_p - nll, cfg.cap))

@@ -60,31 +60,35 @@ def q_minus_v(
     goal_positions: FloatArray,
     goal_quats: FloatArray,
     cfg: IntentConfig,
+    rotation_scale: float = 1.0,
 ) -> FloatArray:
-    """``Q_g(x, u) - V_g(x)`` for every goal, the MaxEnt IOC negative log-likelihood of ``u``.
+    """``Q_g(x, u) - V_g(x)`` for every goal, the MaxEnt IOC negative log-likelihood of ``u`` (per unit of
+    rationality; ``rotation_scale`` as in :func:`q_minus_v_at`).
 
     ``goal_positions`` is ``(G, K, 3)``; the goal's ``V`` and ``Q`` come from its lowest-value pose.
     Returns shape ``(G,)``.
     """
     gp, gq = nearest_goal_poses(position, quat, goal_positions, goal_quats, cfg)
-    return q_minus_v_at(position, quat, user_twist, gp, gq, cfg)
+    return q_minus_v_at(position, quat, user_twist, gp, gq, cfg, rotation_scale)
 
 
 def q_minus_v_at(
     position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
-    goal_quats: FloatArray, cfg: IntentConfig,
+    goal_quats: FloatArray, cfg: IntentConfig, rotation_scale: float = 1.0,
 ) -> FloatArray:
     """``Q_g(x, u) - V_g(x)`` against one pose per goal, ``(G, 3)``/``(G, 4)``, for poses ``(..., 3)``,
     ``(..., 4)`` and twists ``(..., 6)``: shape ``(..., G)``. ``Q`` applies ``u`` for
     ``action_apply_time_s`` and adds the step's cost: that time times the slope of ``V`` (``step_cost =
-    "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``)."""
+    "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``). ``Q - V`` is a
+    translation part plus a rotation part; ``rotation_scale`` multiplies the latter (the tracker's
+    ``rotation_rationality / rationality``)."""
     T = cfg.action_apply_time_s
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]
     diff = goal_positions - position
     d_t = norms(diff)
     d_r = quat_angle(goal_quats, quat)
-    v = huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
+    v_t, v_r = huber_value(d_t, cfg.translation), huber_value(d_r, cfg.rotation)
     p1, q1 = integrate_pose(position, quat, u, T)
     d_t1 = norms(goal_positions - p1)
     d_r1 = quat_angle(goal_quats, q1)
@@ -92,9 +96,9 @@ def q_minus_v_at(
         per_t, per_r = norms(u[..., :3]), norms(u[..., 3:])
     else:
         per_t = per_r = 1.0
-    cost = T * (huber_slope(d_t, cfg.translation) * per_t + huber_slope(d_r, cfg.rotation) * per_r)
-    q_val = cost + huber_value(d_t1, cfg.translation) + huber_value(d_r1, cfg.rotation)
-    return q_val - v
+    trans = T * huber_slope(d_t, cfg.translation) * per_t + huber_value(d_t1, cfg.translation) - v_t
+    rot = T * huber_slope(d_r, cfg.rotation) * per_r + huber_value(d_r1, cfg.rotation) - v_r
+    return trans + rotation_scale * rot
 
 
 def q_minus_v_driven(

@@ -93,7 +93,8 @@ class Rollouts:
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
-        samples = cfg.runtime.belief_hz * dt * cfg.intent.rationality
+        beta = cfg.intent.rationality if translating else cfg.intent.rotation_rationality  # the driven part's
+        samples = cfg.runtime.belief_hz * dt * beta
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
         loglik = np.zeros((C, G, A, G))
