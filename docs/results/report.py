@@ -6,7 +6,8 @@
 Per (scene, task): one table, a row per user and method, with the 95 % intervals of time and input and the
 stars of policy's Holm-corrected paired difference from that method; then policy's ratios of time and
 joystick input to HO and to manual per user with their Holm p-values, and the questions per task beside
-the paper's where the suite has them. Prints to stdout.
+the paper's where the suite has them; then, per task and baseline, how many users policy is significantly
+faster or slower for, and needs significantly less or more input (Holm p < 0.05). Prints to stdout.
 """
 
 from __future__ import annotations
@@ -68,8 +69,28 @@ def report(path: Path) -> str:
                 cells += [f"{s.paper_questions[task]:.2f}"]
             lines.append("| " + " | ".join(cells) + " |")
         out += lines + [""]
+    out += verdicts(comps)
     out += asking(data["trials"])
     return "\n".join(out)
+
+
+def verdicts(comps: list[dict], alpha: float = 0.05) -> list[str]:
+    """Per (scene, task) and baseline: the users for whom policy is significantly faster / slower and needs
+    significantly less / more joystick input (paired Wilcoxon, Holm per task and user, ``p < alpha``), of
+    the users tested."""
+    keys = dict.fromkeys((c["scene"], c["task"], c["baseline"]) for c in comps)
+    if not keys:
+        return []
+    lines = [f"Policy against each baseline, users with Holm p < {alpha} (of the users tested):", "",
+             "| scene | task | baseline | users | faster | slower | less input | more input |", "|" + "---|" * 8]
+    for scene, task, base in keys:
+        mine = [c for c in comps if (c["scene"], c["task"], c["baseline"]) == (scene, task, base)]
+        cells = [scene, f"`{task}`", base, str(len({c["user"] for c in mine}))]
+        for metric in ("completion_time_s", "joystick_input"):
+            sig = [c for c in mine if c["metric"] == metric and c["p_holm"] is not None and c["p_holm"] < alpha]
+            cells += [str(sum(c["median_diff"] < 0 for c in sig)), str(sum(c["median_diff"] > 0 for c in sig))]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def _mean(xs: list) -> str:
