@@ -63,7 +63,7 @@ class IntentConfig(_Section):
         10.0, gt=0, description="beta in P(u | g) ~ exp(-beta (Q_g - V_g)), per input sample (docs/model.md, The tracker)"
     )
     rotation_rationality: float = Field(
-        10.0, gt=0,
+        200.0, gt=0,
         description="beta of the rotation part of Q_g - V_g (rotation-mode input), per input sample; rationality "
         "weighs the translation part (docs/model.md, The tracker)",
     )

@@ -39,7 +39,8 @@ BEFORE_THE_KEY = {
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
 move-generator HO the defaults, and a question's time 2.5 s; session 10 HO following the tracked belief
-in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds)."""
+in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds). A file without
+``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``."""
 
 
 def _config(recorded: dict) -> Config:
@@ -49,6 +50,8 @@ def _config(recorded: dict) -> Config:
     recorded = {**recorded}
     for section, keys in BEFORE_THE_KEY.items():
         recorded[section] = {**keys, **recorded.get(section, {})}
+    # one beta for both parts of the tracker's evidence before session 14 split out the rotation part's
+    recorded["intent"].setdefault("rotation_rationality", recorded["intent"]["rationality"])
     current = Config().model_dump(mode="json")
 
     def keep(rec: dict, cur: dict) -> dict:
