@@ -196,7 +196,7 @@ def test_joystick_lost_mid_motion_zeroes_the_command_at_the_next_tick_and_comes_
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "hung"])
 def test_planner_worker_killed_or_hung_falls_back_and_is_replaced(tmp_path, sig):
-    """policy+noqns (plans, never asks) with the simulated user. While a planned move is applied the
+    """policy+noqns (plans, never asks) with the simulated user. While a planned move (or HO) is applied the
     worker is killed (SIGKILL) or hangs (SIGSTOP): the move is dropped for no assistance within one
     planning period of the plan that did not come, a new worker is started (a dead one at the next
     planner tick, a hung one after planner.budget_s + runtime.worker_hang_s) and plans again, and the
@@ -250,7 +250,8 @@ def test_planner_worker_killed_or_hung_falls_back_and_is_replaced(tmp_path, sig)
     plans_last = before[-1]["planner"]["plans"]
     t_plan_lb = max(s["t"] for s in before if s["planner"]["plans"] < plans_last)
     t_plan_ub = min(s["t"] for s in before if s["planner"]["plans"] == plans_last)  # it arrived in between
-    assert states[k - 1]["action"].startswith("move"), "no planned move applied at the fault"
+    # a planned assistance at the fault: the move waited for, or HO if a plan switched in the last instants
+    assert states[k - 1]["action"].startswith(("move", "ho")), "no planned assistance applied at the fault"
     fallback = next(s for s in states[k:] if s["action"] == "none")
     # Nothing but no-assist between the fallback and the first plan of the new worker.
     t_new_plan = max(s["t"] for s in stream if s["t"] < ok["t"])  # it came after this state message

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import CLI, DaemonProc
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from sa_daemon.io.protocol import RequestError, parse_request
@@ -85,6 +85,7 @@ def test_the_protocol_refuses_malformed_set_scene_requests():
                         st.sampled_from(["name", "shape", "size", "position", "yaw", "objects", "grasps",
                                          "grasp_types", "rim", "start", "type", "quat_wxyz"]), c, max_size=5),
                     max_leaves=25))
+@example({"objects": [{"grasps": 1.0}]})  # found by this test: the grasp count took len() of a number
 def test_fuzzed_scenes_are_a_scene_or_refused_with_a_reason(data):
     try:
         scene_from_request({"scene": data}, SCENE1)

@@ -62,7 +62,7 @@ def scene_from_request(args: dict[str, Any], current: Scene) -> Scene:
     if isinstance(objects, list):
         if len(objects) > MAX_OBJECTS:
             raise SceneError(f"set_scene: objects: {len(objects)} objects, more than {MAX_OBJECTS}")
-        n = sum(len(o.get("grasps") or []) for o in objects if isinstance(o, dict))
+        n = sum(len(o["grasps"]) for o in objects if isinstance(o, dict) and isinstance(o.get("grasps"), list))
         if n > MAX_GRASPS:
             raise SceneError(f"set_scene: grasps: {n} grasp poses, more than {MAX_GRASPS}")
     if "start" not in data:
