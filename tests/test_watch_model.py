@@ -271,16 +271,17 @@ def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, 
     return p, q, b / b.sum()
 
 
-@pytest.mark.parametrize("rotation_beta", [None, 200.0])
+@pytest.mark.parametrize("intent", [{}, {"rotation_rationality": 200.0},
+                                    {"rotation_rationality": 200.0, "step_cost": "time"}],
+                         ids=["defaults", "beta_r", "beta_r-time"])
 @pytest.mark.parametrize("mode, speed", [(Mode.TRANSLATION, (0.05, 0.0)), (Mode.ROTATION, (0.0, 0.3))])
-def test_ho_in_a_rollout_follows_the_belief_the_predicted_input_gives(mode, speed, rotation_beta):
+def test_ho_in_a_rollout_follows_the_belief_the_predicted_input_gives(mode, speed, intent):
     """``planner.ho_belief = "tracked"`` (default): the batched rollouts move HO exactly as a plain loop
     that updates HO's belief after every step, for every goal the user may head to; and that belief
     grows on the user's goal, so HO ends nearer it than HO under the plan's fixed belief does. Also with
-    the rotation part of the evidence weighed apart (``intent.rotation_rationality``)."""
+    the rotation part of the evidence weighed apart (``intent.rotation_rationality``), in either step-cost form."""
     cfg = _cfg()
-    if rotation_beta is not None:
-        cfg = cfg.model_copy(update={"intent": cfg.intent.model_copy(update={"rotation_rationality": rotation_beta})})
+    cfg = cfg.model_copy(update={"intent": cfg.intent.model_copy(update=intent)})
     snap = _snap()
     goals, pose, steps, dt = snap.goals, snap.pose, 4, 0.5
     kp, kq = goals.desired_poses(pose, cfg.intent.rotation_weight_m_per_rad)

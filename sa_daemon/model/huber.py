@@ -103,7 +103,7 @@ def q_minus_v_at(
 
 def q_minus_v_driven(
     position: FloatArray, quat: FloatArray, user_linear: FloatArray | None, user_angular: FloatArray | None,
-    goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig,
+    goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig, rotation_scale: float = 1.0,
 ) -> FloatArray:
     """:func:`q_minus_v_at` for an input that drives one part only (the joystick's mode): ``user_linear``
     ``(..., 3)`` m/s with ``user_angular`` ``None``, or the reverse (rad/s). With the path step cost
@@ -112,8 +112,10 @@ def q_minus_v_driven(
     if cfg.step_cost != "path":
         lin = np.zeros(np.shape(user_angular)) if user_linear is None else user_linear
         ang = np.zeros(np.shape(user_linear)) if user_angular is None else user_angular
-        return q_minus_v_at(position, quat, np.concatenate((lin, ang), axis=-1), goal_positions, goal_quats, cfg)
+        return q_minus_v_at(position, quat, np.concatenate((lin, ang), axis=-1), goal_positions, goal_quats, cfg,
+                            rotation_scale)
     T = cfg.action_apply_time_s
+    scale = 1.0
     if user_angular is None:
         p = np.asarray(position)[..., None, :]
         u = np.asarray(user_linear)[..., None, :]
@@ -125,8 +127,8 @@ def q_minus_v_driven(
         w = np.asarray(user_angular)[..., None, :]
         d = quat_angle(goal_quats, q)
         d1 = quat_angle(goal_quats, turn(q, w, T))
-        h, speed = cfg.rotation, norms(w)
-    return T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h)
+        h, speed, scale = cfg.rotation, norms(w), rotation_scale
+    return scale * (T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h))
 
 
 def assistance_twists(

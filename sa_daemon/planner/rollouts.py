@@ -93,8 +93,8 @@ class Rollouts:
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
-        beta = cfg.intent.rationality if translating else cfg.intent.rotation_rationality  # the driven part's
-        samples = cfg.runtime.belief_hz * dt * beta
+        samples = cfg.runtime.belief_hz * dt * cfg.intent.rationality
+        rot_scale = cfg.intent.rotation_rationality / cfg.intent.rationality  # the tracker's weighting
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
         loglik = np.zeros((C, G, A, G))
@@ -144,7 +144,7 @@ class Rollouts:
                 if tracked and s + 1 < steps:
                     log_w = log_w - samples * q_minus_v_driven(
                         P[:, :, h], Q[:, :, h], u_lin[:, :, h] if translating else None,
-                        None if translating else u_ang[:, :, h], kp, kq, cfg.intent)
+                        None if translating else u_ang[:, :, h], kp, kq, cfg.intent, rot_scale)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)  # (HO's free part: no input there)
@@ -153,7 +153,7 @@ class Rollouts:
                 loglik -= samples * q_minus_v_driven(
                     np.broadcast_to(P, (C, G, A, 3)), np.broadcast_to(Q, (C, G, A, 4)),
                     np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
-                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent)
+                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent, rot_scale)
             P = P + t_lin * dt
             Q = turn(Q, t_ang, dt)
             if tracked:  # the user does not drive this part: HO's share of the blend alone
