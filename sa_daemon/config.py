@@ -68,6 +68,12 @@ class IntentConfig(_Section):
         "weighs the translation part (docs/model.md, The tracker)",
     )
 
+    @property
+    def rotation_scale(self) -> float:
+        """``rotation_rationality / rationality``: the rotation part's weight in ``Q_g - V_g`` relative to the
+        translation part's, the scale the tracker and the watch model's rollouts both apply."""
+        return self.rotation_rationality / self.rationality
+
 
 class HOConfig(_Section):
     """Hindsight-optimisation assistance twist (Javdani et al.)."""

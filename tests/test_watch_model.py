@@ -251,7 +251,8 @@ def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitme
 def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, dt):
     """One HO rollout for a user heading to goal ``g``, one step at a time: HO's belief starts at ``b0``
     and after every step takes the tracker's MaxEnt IOC update for that step's predicted input
-    (``belief_hz x dt`` samples, rationality ``beta``, the rotation part's ``rotation_rationality``). Returns the pose after ``steps`` and the belief."""
+    (``belief_hz x dt`` samples, rationality ``beta``, the rotation part's ``rotation_rationality``).
+    Returns the pose after ``steps`` and the belief."""
     log_b = np.log(b0)
     p, q = np.array(position, dtype=float), np.array(quat, dtype=float)
     standoff, alpha, T = cfg.planner.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s

@@ -141,7 +141,7 @@ class Belief:
         """
         u = _check_finite("user_twist", user_twist, (6,))
         nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
-                                          self.goals.quats_wxyz, cfg, cfg.rotation_rationality / cfg.rationality)
+                                          self.goals.quats_wxyz, cfg, cfg.rotation_scale)
         free = self._competing()
         if free is None:
             return self._with(self._normalised(self.log_p - nll, cfg.cap))

@@ -81,7 +81,7 @@ def q_minus_v_at(
     ``action_apply_time_s`` and adds the step's cost: that time times the slope of ``V`` (``step_cost =
     "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``). ``Q - V`` is a
     translation part plus a rotation part; ``rotation_scale`` multiplies the latter (the tracker's
-    ``rotation_rationality / rationality``)."""
+    ``IntentConfig.rotation_scale``)."""
     T = cfg.action_apply_time_s
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]

@@ -94,7 +94,7 @@ class Rollouts:
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
         samples = cfg.runtime.belief_hz * dt * cfg.intent.rationality
-        rot_scale = cfg.intent.rotation_rationality / cfg.intent.rationality  # the tracker's weighting
+        rot_scale = cfg.intent.rotation_scale  # the tracker's weight of the rotation part
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
         loglik = np.zeros((C, G, A, G))
