@@ -172,6 +172,12 @@ class PlannerConfig(_Section):
         2.0, ge=0, le=100,
         description="watch model: a plan's last pose is charged R_d for this long after the horizon (s)",
     )
+    terminal: Literal["fixed", "approach"] = Field(
+        "fixed",
+        description="watch model: what a plan's last pose is worth after the horizon. fixed: R_d there for "
+        "terminal_s; approach: the return of finishing the approach at the assisted speed, goal bonus "
+        "included (model.reward.approach_return; docs/model.md)",
+    )
     watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
     watch_levels: int = Field(1, ge=0, le=1, description="watch model: 1 = a motion may be watched before deciding; 0 = no")
     watch_moves: int = Field(

@@ -9,6 +9,7 @@ import pytest
 
 from sa_daemon.config import RewardConfig
 from sa_daemon.model.reward import (
+    approach_return,
     distance_reward,
     opposes,
     opposition_reward,
@@ -28,6 +29,34 @@ def r_r(d_rot: float) -> float:
 
 def reward(d_t, d_r) -> float:
     return float(distance_reward(d_t, d_r, CFG))
+
+
+# -- the approach after the horizon (planner.terminal = "approach") ------------------------------------
+
+
+@pytest.mark.parametrize("d_t, d_r, v_t, v_r", [
+    (0.30, 0.4, 0.1, 0.2),   # translation takes longer: tau = 3 s
+    (0.30, 1.5, 0.1, 0.2),   # rotation takes longer: tau = 7.5 s
+    (0.05, 0.8, 0.1, 0.15),  # inside delta all the way: R_r from the start
+    (0.12, 0.0, 0.1, 0.2),   # no rotation left
+])
+def test_the_approach_return_is_r_d_summed_along_a_straight_constant_speed_approach(d_t, d_r, v_t, v_r):
+    """Walk the approach by hand in 1 ms steps (both parts shrinking together, arriving at ``tau``),
+    summing the section III-E reward per paper step, then the goal bonus."""
+    tau = max(d_t / v_t, d_r / v_r)
+    dt = 1e-3
+    total = 0.0
+    for i in range(round(tau / dt)):
+        u = 1.0 - (i + 0.5) * dt / tau  # the share of the way still to go, at the middle of the step
+        total += (r_t(u * d_t) + (r_r(u * d_r) if u * d_t <= 0.1 else 0.0)) * dt / CFG.step_s
+    got = float(approach_return(d_t, d_r, v_t, v_r, CFG))
+    assert got == pytest.approx(total + 100.0, rel=1e-4, abs=1e-3)
+
+
+def test_the_approach_return_at_the_goal_is_the_bonus_and_grows_with_time_to_go():
+    assert float(approach_return(0.0, 0.0, 0.1, 0.2, CFG)) == pytest.approx(100.0)
+    slow, fast = (float(approach_return(0.2, 1.0, 0.1, v_r, CFG)) for v_r in (0.05, 0.3))
+    assert slow < fast < 100.0  # the same distances, a slower turn: more time to go, dearer
 
 
 # -- R_d ------------------------------------------------------------------------------------------------

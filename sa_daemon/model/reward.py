@@ -26,6 +26,33 @@ def distance_reward(d_trans: FloatArray, d_rot: FloatArray, cfg: RewardConfig) -
     return r_t + r_r + np.where(reached, cfg.goal, 0.0)
 
 
+def approach_return(d_trans: FloatArray, d_rot: FloatArray, v_trans: float, v_rot: float,
+                    cfg: RewardConfig) -> FloatArray:
+    """The return of finishing the approach from ``d_trans`` (m) and ``d_rot`` (rad) to ``k_c``, in reward
+    units (``R_d`` per paper step of ``step_s``), with the goal bonus at the end.
+
+    The approach is a straight line at constant speed in both parts, arriving together after ``tau =
+    max(d_trans / v_trans, d_rot / v_rot)`` s (m/s, rad/s), so at the fraction ``u`` of the way still to go
+    the distances are ``u d_trans`` and ``u d_rot``. Integrating ``R_d`` over it, per ``step_s``:
+
+        R_t:  -scale (tau / step_s) (1 - (1 - 2^(-beta d_trans)) / (beta d_trans ln 2))
+        R_r:  -scale / (2 pi) d_rot (tau / step_s) m^2 / 2,   m = min(1, delta / d_trans)
+
+    (``R_r`` counts once ``u d_trans <= delta``, the last fraction ``m`` of the way). Zero distance, zero
+    cost; a slower approach costs proportionally more: time still to go is what it charges.
+    """
+    d_t = np.asarray(d_trans, dtype=float)
+    d_r = np.asarray(d_rot, dtype=float)
+    steps = np.maximum(d_t / v_trans, d_r / v_rot) / cfg.step_s
+    x = cfg.beta * math.log(2.0) * d_t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean_left = np.where(x > 1e-9, -np.expm1(-x) / x, 1.0 - x / 2.0)  # mean of 2^(-beta u d_t) over u
+        m = np.minimum(1.0, cfg.rotation_threshold_m / d_t)
+    r_t = -cfg.scale * steps * (1.0 - mean_left)
+    r_r = -cfg.scale / (2.0 * math.pi) * d_r * steps * m * m / 2.0
+    return r_t + r_r + cfg.goal
+
+
 def opposes(user_twist: FloatArray, robot_twist: FloatArray, threshold: float) -> FloatArray:
     """True where, in any of the six dimensions, the twists have opposite signs and both magnitudes
     exceed ``threshold`` (section III-E). Broadcasts over leading axes; returns a bool array."""

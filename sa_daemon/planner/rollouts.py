@@ -12,8 +12,11 @@ while the user drives), or the start's all along (``"fixed"``). Recorded per rol
   for goal ``g``: per paper step (``reward.step_s``) the distance reward ``R_d`` to ``g``'s ``k_c`` at
   the pose reached, plus ``-5`` where the robot's twist opposes the user's; ``+100`` once, when the
   pose reaches ``k_c``, after which the rollout earns nothing more (the goal is terminal); plus, for a
-  rollout that has not arrived, ``R_d`` at its last pose for ``planner.terminal_s`` more (the task goes
-  on after the horizon from where it ends);
+  rollout that has not arrived, what its last pose is worth after the horizon (the task goes on from
+  where it ends): ``planner.terminal = "fixed"`` (default), ``R_d`` there for ``planner.terminal_s``;
+  ``"approach"``, the return of finishing the approach at the assisted speed (``alpha`` x the move
+  generator's top speed + ``1 - alpha`` x the user's, in each part), goal bonus included
+  (:func:`~..model.reward.approach_return`);
 * ``stay[c, g]``: the same return for one rollout step of standing still at start ``c`` (a question);
 * the pose and the return (without the terminal charge: the task goes on from there) after
   ``watch_steps`` steps, and ``loglik[c, g, a, :]``, the MaxEnt IOC log-likelihood the
@@ -39,7 +42,7 @@ from ..config import Config
 from ..geometry import FloatArray, norms, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_driven
-from ..model.reward import distance_reward, opposes
+from ..model.reward import approach_return, distance_reward, opposes
 from ..model.twists import (
     ho_angular,
     ho_linear,
@@ -99,8 +102,14 @@ class Rollouts:
         self.value = np.empty((C, G, A, steps + 1))
         loglik = np.zeros((C, G, A, G))
 
-        def reward_at() -> tuple[FloatArray, FloatArray]:
-            """(R_d without the bonus, reached) of every rollout's own goal at its pose, ``(C, G, A)``."""
+        tail = cfg.planner.terminal_s / cfg.reward.step_s  # the state at the horizon lasts this many paper steps
+        v_t = alpha * cfg.move.linear_max_mps + (1.0 - alpha) * speed[0]  # the assisted approach (m/s, rad/s)
+        v_r = alpha * cfg.move.angular_max_radps + (1.0 - alpha) * speed[1]
+        approach = cfg.planner.terminal == "approach"
+
+        def reward_at() -> tuple[FloatArray, FloatArray, FloatArray]:
+            """(R_d without the bonus, reached, the terminal value) of every rollout's own goal at its pose,
+            ``(C, G, A)``; the terminal value is what the pose is worth after the horizon if not arrived."""
             d_t = norms(P - gp)
             d_r = quat_angle(Q, gq)
             if tracked and translating:
@@ -108,7 +117,8 @@ class Rollouts:
             elif tracked:
                 d_t[:, :, h] = norms(free - kp)
             reached = (d_t <= cfg.reward.goal_translation_m) & (d_r <= cfg.reward.goal_rotation_rad)
-            return distance_reward(d_t, d_r, cfg.reward) - np.where(reached, cfg.reward.goal, 0.0), reached
+            r = distance_reward(d_t, d_r, cfg.reward) - np.where(reached, cfg.reward.goal, 0.0)
+            return r, reached, approach_return(d_t, d_r, v_t, v_r, cfg.reward) if approach else r * tail
 
         def watched(array: FloatArray, free_part: bool) -> FloatArray:
             """``array`` as ``(C, G, A, .)``, HO's column from ``free`` where that part is kept apart."""
@@ -117,9 +127,8 @@ class Rollouts:
                 out[:, :, h] = free
             return out
 
-        tail = cfg.planner.terminal_s / cfg.reward.step_s  # the state at the horizon lasts this many paper steps
-        r0, arrived = reward_at()
-        self.value[..., 0] = np.where(arrived, 0.0, r0 * tail)
+        r0, arrived, end = reward_at()
+        self.value[..., 0] = np.where(arrived, 0.0, end)
         self.stay = np.where(arrived, 0.0, r0 * k)[:, :, 0]  # one rollout step standing still, (C, G)
         total = np.zeros((C, G, A))
         zero = np.zeros(1)
@@ -158,10 +167,10 @@ class Rollouts:
             Q = turn(Q, t_ang, dt)
             if tracked:  # the user does not drive this part: HO's share of the blend alone
                 free = turn(free, alpha * ho_ang, dt) if translating else free + alpha * ho_lin * dt
-            r, reached = reward_at()
+            r, reached, end = reward_at()
             total = total + np.where(arrived, 0.0, r * k + step_penalty + np.where(reached, cfg.reward.goal, 0.0))
             arrived = arrived | reached
-            self.value[..., s + 1] = total + np.where(arrived, 0.0, r * tail)
+            self.value[..., s + 1] = total + np.where(arrived, 0.0, end)
             if s + 1 == watch_steps:
                 self.watch_positions = watched(P, free_part=not translating)
                 self.watch_quats = watched(Q, free_part=translating)
