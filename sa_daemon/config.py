@@ -184,6 +184,11 @@ class PlannerConfig(_Section):
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
+    threads: int = Field(
+        0, ge=0, le=64,
+        description="watch model: threads the compiled rollouts split their start poses over (the results do not "
+        "depend on it); 0 = one per core this process may use. The evaluation gives each of its jobs its share",
+    )
     ho_belief: Literal["tracked", "fixed"] = Field(
         "tracked",
         description="watch model: HO in a rollout follows the belief the tracker reaches from the predicted input "

@@ -28,6 +28,7 @@ from ..extras import require
 from ..geometry import Pose
 from ..model.belief import Belief
 from ..model.model import SharedAutonomyModel
+from ..planner.kernel import supported, threads
 from ..planner.problem import Problem
 from ..planner.snapshot import Snapshot
 from ..planner.solver import Solver
@@ -104,6 +105,8 @@ def run_planner_bench(
         "top_goals": cfg.planner.top_goals,
         "max_questions": cfg.planner.max_questions,
         "lookahead_steps": cfg.reward.lookahead_steps,
+        "rollouts": (f"compiled, {threads(cfg)} thread(s)" if supported(cfg) else "numpy")
+        if cfg.planner.model == "watch" else None,
         "solve_ms_p50": float(np.percentile(solve_ms, 50)),
         "solve_ms_p90": float(np.percentile(solve_ms, 90)),
         "solve_ms_p99": float(np.percentile(solve_ms, 99)),
@@ -134,7 +137,7 @@ def format_table(r: dict) -> str:
     ]
     w = max(len(a) for a, _, _ in rows)
     head = (f"planner benchmark: {r['scene']} ({r['goals']} goals, {r['samples']} snapshots, G_m={r['top_goals']}, "
-            f"{r.get('model', 'commit')} model)")
+            f"{r.get('model', 'commit')} model" + (f", {r['rollouts']} rollouts" if r.get("rollouts") else "") + ")")
     return "\n".join([head] + [f"  {a:<{w}}  {b:>12}  {c}" for a, b, c in rows])
 
 

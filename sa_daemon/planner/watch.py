@@ -177,6 +177,11 @@ class WatchSearch:
         n, nq = avail.shape
         L = self.L_yes  # (Q, G)
         node, q = np.nonzero(avail)
+        Vq = np.full((n, nq, B.shape[1]), -np.inf)
+        total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
+        if steps == self.n_q:  # no time left after the answer: whatever it is, the pose's value at the horizon
+            Vq[node, q] = total + R.value[c[node], :, 0, 0]  # (no action moves in 0 steps: any column)
+            return Vq
         Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
         py = np.einsum("kg,kg->k", Bn, L[q])
         yes_B, no_B = Bn * L[q] / py[:, None], Bn * (1.0 - L[q]) / (1.0 - py)[:, None]
@@ -196,8 +201,6 @@ class WatchSearch:
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
-        Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
         for i, (_, _, like) in enumerate(outcomes):
             total = total + like * v[i * k:(i + 1) * k]
         Vq[node, q] = total

@@ -39,6 +39,7 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
 
     from ..config import config_from_dict
     from ..model.model import SharedAutonomyModel
+    from .kernel import warm_up
     from .solver import Solver
 
     cfg = config_from_dict(cfg_data, "planner worker")
@@ -49,6 +50,7 @@ def _worker_main(conn: Connection, cfg_data: dict) -> None:
     except OSError:
         pass
     solver = Solver(SharedAutonomyModel(cfg))
+    warm_up(cfg)  # compiled on this machine's first run (seconds), loaded from numba's cache after
     try:
         conn.send(("hello", os.getpid()))
         while True:

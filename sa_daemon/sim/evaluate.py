@@ -23,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..config import Config, ConfigError
+from ..planner.kernel import cores
 from ..world.scene import load_scene
 from . import stats
 from .episode import arm_factory, run_trial
@@ -106,6 +107,9 @@ def run_trials(
         raise ValueError(f"unknown backend {backend!r} ({', '.join(BACKENDS)})")
     for user in {s.user for s in specs}:
         _profile(user)  # a bad profile fails here, before any worker starts
+    if cfg.planner.threads == 0:  # each job its share of the cores for the planner's rollouts
+        share = 1 if backend == "ray" else max(1, cores() // max(jobs, 1))
+        cfg = cfg.model_copy(update={"planner": cfg.planner.model_copy(update={"threads": share})})
     work = [(s, cfg, plots, arm) for s in specs]
     bar = tqdm(total=len(work), desc="trials", unit="trial", file=sys.stderr, disable=not progress,
                smoothing=0.05)

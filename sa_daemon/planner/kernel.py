@@ -1,0 +1,370 @@
+"""The rollouts of :mod:`.rollouts`, compiled: one fused loop per rollout instead of numpy passes.
+
+:class:`~.rollouts.Rollouts` integrates every (start ``c``, user goal ``g``, motion action ``a``) rollout
+with about sixty numpy passes a step over arrays of ``C G A`` poses; most of a plan's time went into
+those passes and their temporaries (``docs/model.md``, "Where the rest goes"). This module computes the
+same model rollout by rollout in one compiled loop (numba), with scalar quaternion algebra and no
+temporaries. It implements the defaults, ``ho.generator = "moves"`` and ``intent.step_cost = "path"``,
+in both joystick modes, both HO beliefs (``planner.ho_belief``) and both terminal values
+(``planner.terminal``); :class:`~.rollouts.Rollouts` keeps the numpy form as the reference (the tests hold
+the two equal to rounding) and for the other options.
+
+Per rollout and step, as in :mod:`.rollouts`: the user's twist in the driven part toward ``g`` (the
+pre-grasp point first in translation), the robot's twist (move-to-goal toward its own goal; HO the move
+generator applied to the belief-weighted mean error at the pose the user's twist reaches in
+``action_apply_time_s``; no-assist none), the blend, section III-E's reward. The part the user does not
+drive moves by the robot's share alone, so for moves and no-assist it does not depend on ``g``: it is
+integrated once per ``(c, a)`` and shared. HO carries its whole pose and, tracked, its own belief per
+``(c, g)``. Units: m, rad, s, m/s, rad/s; rewards in the paper's units.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from numba import njit
+
+from ..config import Config
+from ..geometry import FloatArray
+
+MOVE, HO, NONE = 0, 1, 2
+"""Action kinds as the kernel reads them."""
+
+_TWO_PI = 2.0 * math.pi
+_LN2 = math.log(2.0)
+
+
+@njit(cache=True, inline="always")
+def _qmul(aw, ax, ay, az, bw, bx, by, bz):
+    """Hamilton product ``a * b`` of wxyz quaternions."""
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+@njit(cache=True, inline="always")
+def _rot_err(tw, tx, ty, tz, qw, qx, qy, qz):
+    """Rotation vector (rad) turning ``q`` into ``t`` (``geometry.rotation_error``), and its norm, the angle
+    between them (``2 atan2``: the same as :func:`_angle`, better conditioned near zero)."""
+    w, x, y, z = _qmul(tw, tx, ty, tz, qw, -qx, -qy, -qz)
+    s = math.sqrt(x * x + y * y + z * z)
+    angle = 2.0 * math.atan2(s, min(abs(w), 1.0))
+    scale = angle / max(s, 1e-12) if s > 1e-9 else 2.0
+    if w < 0.0:
+        scale = -scale
+    return x * scale, y * scale, z * scale, angle
+
+
+@njit(cache=True, inline="always")
+def _turn(qw, qx, qy, qz, ax, ay, az, dt):
+    """``exp(w dt) q`` renormalised (``geometry.turn``) for angular velocity ``w`` (rad/s)."""
+    rx, ry, rz = ax * dt, ay * dt, az * dt
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    half = 0.5 * angle
+    k = math.sin(half) / max(angle, 1e-12) if angle > 1e-9 else 0.5
+    w, x, y, z = _qmul(math.cos(half), rx * k, ry * k, rz * k, qw, qx, qy, qz)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return w / n, x / n, y / n, z / n
+
+
+@njit(cache=True, inline="always")
+def _angle(aw, ax, ay, az, bw, bx, by, bz):
+    """Geodesic angle (rad) between two rotations: ``2 acos |<a, b>|``."""
+    return 2.0 * math.acos(min(abs(aw * bw + ax * bx + ay * by + az * bz), 1.0))
+
+
+@njit(cache=True, inline="always")
+def _clip(x, y, z, limit):
+    """``(x, y, z)`` scaled down to a norm of at most ``limit``."""
+    f = min(1.0, limit / max(math.sqrt(x * x + y * y + z * z), 1e-12))
+    return x * f, y * f, z * f
+
+
+@njit(cache=True, inline="always")
+def _huber(d, c, delta, a, weight):
+    """``weight V(d)`` and ``weight dV/dd`` of the Huber value (``model.huber``)."""
+    if d <= delta:
+        return weight * (0.5 * (c / delta) * d * d + a * d), weight * ((c / delta) * d + a)
+    return weight * ((c + a) * d - 0.5 * c * delta), weight * (c + a)
+
+
+@njit(cache=True)
+def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, tz, j,
+               kp, kq, T, hp, rot_scale):
+    """``Q_j - V_j`` of goal ``j`` for an input driving one part (``huber.q_minus_v_driven``, path step
+    cost); ``t`` is ``q`` turned by the input for ``T`` (used in rotation mode only)."""
+    speed = math.sqrt(ux * ux + uy * uy + uz * uz)
+    if translating:
+        dx, dy, dz = kp[j, 0] - px, kp[j, 1] - py, kp[j, 2] - pz
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        ex, ey, ez = dx - ux * T, dy - uy * T, dz - uz * T
+        d1 = math.sqrt(ex * ex + ey * ey + ez * ez)
+        v, slope = _huber(d, hp[0], hp[1], hp[2], hp[3])
+        v1, _ = _huber(d1, hp[0], hp[1], hp[2], hp[3])
+        return T * slope * speed + v1 - v
+    d = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz)
+    d1 = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz)
+    v, slope = _huber(d, hp[4], hp[5], hp[6], hp[7])
+    v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
+    return rot_scale * (T * slope * speed + v1 - v)
+
+
+@njit(cache=True)
+def _reward(d_t, d_r, rp, tail, approach):
+    """``R_d`` without the bonus, whether ``k_c`` is reached, and what the pose is worth after the horizon:
+    ``tail`` paper steps of ``R_d``, or with ``approach`` the return of finishing the approach
+    (``reward.distance_reward``, ``reward.approach_return``). ``rp``: scale, beta, rotation threshold (m),
+    goal translation (m), goal rotation (rad), goal bonus, step (s), v_t (m/s), v_r (rad/s)."""
+    scale, beta, thr = rp[0], rp[1], rp[2]
+    r = -scale * (1.0 - math.exp(-beta * _LN2 * d_t))
+    if d_t <= thr:
+        r -= scale * d_r / _TWO_PI
+    reached = d_t <= rp[3] and d_r <= rp[4]
+    if not approach:
+        return r, reached, r * tail
+    steps = max(d_t / rp[7], d_r / rp[8]) / rp[6]
+    x = beta * _LN2 * d_t
+    mean_left = -math.expm1(-x) / x if x > 1e-9 else 1.0 - x / 2.0
+    m = min(1.0, thr / d_t) if d_t > 0.0 else 1.0
+    return r, reached, -scale * steps * (1.0 - mean_left) - scale / _TWO_PI * d_r * steps * m * m / 2.0 + rp[5]
+
+
+@njit(cache=True, nogil=True)
+def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, tracked, approach,
+         steps, watch_steps, dt, fp, hp, rp, g_lo, g_hi,
+         value, stay, watch_p, watch_q, watch_ret, loglik):
+    """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``).
+
+    ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
+    rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
+    per rollout step ``k``, terminal paper steps, move gains and top speeds (linear, angular).
+    ``hp``: the translation and rotation Huber ``c, delta, a, weight``. ``kind``/``targets``: per action
+    its kind and, for moves, its goal.
+    """
+    C, G, A = positions.shape[0], kp.shape[0], kind.shape[0]
+    sp_t, sp_r, standoff, alpha, T = fp[0], fp[1], fp[2], fp[3], fp[4]
+    per_step, th, samples, rot_scale, k, tail = fp[5], fp[6], fp[7], fp[8], fp[9], fp[10]
+    g_t, m_t, g_r, m_r = fp[11], fp[12], fp[13], fp[14]
+    goal = rp[5]
+    shared = np.empty((steps + 1, 4))  # the part the user does not drive, per (c, a) for moves and no-assist
+    lw = np.empty(G)
+    w = np.empty(G)
+    for c in range(C):
+        for a in range(A):
+            ho = kind[a] == HO
+            t = targets[a]
+            if not ho:  # the undriven part: the robot's share of a move, nothing for no-assist
+                if translating:
+                    sw, sx, sy, sz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
+                else:
+                    sx, sy, sz = positions[c, 0], positions[c, 1], positions[c, 2]
+                    sw = 0.0
+                for s in range(steps + 1):
+                    shared[s, 0], shared[s, 1], shared[s, 2], shared[s, 3] = sw, sx, sy, sz
+                    if kind[a] == MOVE:
+                        if translating:
+                            ex, ey, ez, _ = _rot_err(kq[t, 0], kq[t, 1], kq[t, 2], kq[t, 3], sw, sx, sy, sz)
+                            ax, ay, az = _clip(g_r * ex, g_r * ey, g_r * ez, m_r)
+                            sw, sx, sy, sz = _turn(sw, sx, sy, sz, alpha * ax, alpha * ay, alpha * az, dt)
+                        else:
+                            vx, vy, vz = _clip(g_t * (kp[t, 0] - sx), g_t * (kp[t, 1] - sy), g_t * (kp[t, 2] - sz), m_t)
+                            sx, sy, sz = sx + alpha * vx * dt, sy + alpha * vy * dt, sz + alpha * vz * dt
+                    elif translating:
+                        sw, sx, sy, sz = _turn(sw, sx, sy, sz, 0.0, 0.0, 0.0, dt)
+            for g in range(g_lo, g_hi):
+                px, py, pz = positions[c, 0], positions[c, 1], positions[c, 2]
+                qw, qx, qy, qz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
+                gw, gx, gy, gz = kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3]
+                if ho:
+                    for j in range(G):
+                        lw[j] = log_w0[c, j]
+                # rotation mode: the error the user drives along, whose norm is the angle to g
+                ex, ey, ez, d_r = _rot_err(gw, gx, gy, gz, qw, qx, qy, qz)
+                if translating:
+                    d_r = _angle(qw, qx, qy, qz, gw, gx, gy, gz)
+                dpx, dpy, dpz = px - kp[g, 0], py - kp[g, 1], pz - kp[g, 2]
+                r, arrived, end = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail, approach)
+                value[c, g, a, 0] = 0.0 if arrived else end
+                if a == 0:
+                    stay[c, g] = 0.0 if arrived else r * k
+                total = 0.0
+                for s in range(steps):
+                    # the user's twist toward g, in the driven part
+                    if translating:
+                        dx, dy, dz = kp[g, 0] - px, kp[g, 1] - py, kp[g, 2] - pz
+                        if math.sqrt(dx * dx + dy * dy + dz * dz) > 1.5 * standoff:
+                            dx, dy, dz = pre[g, 0] - px, pre[g, 1] - py, pre[g, 2] - pz
+                        ux, uy, uz = _clip(dx, dy, dz, sp_t)
+                    else:
+                        ux, uy, uz = _clip(ex, ey, ez, sp_r)
+                    tw, tx, ty, tz = qw, qx, qy, qz  # q turned by the input for T (rotation mode)
+                    if not translating and (ho or s < watch_steps):
+                        tw, tx, ty, tz = _turn(qw, qx, qy, qz, ux, uy, uz, T)
+                    # the robot's twist: driven part (rx, ry, rz), undriven part (ox, oy, oz)
+                    rx = ry = rz = ox = oy = oz = 0.0
+                    if ho:
+                        mx = lw[0]
+                        for j in range(1, G):
+                            mx = max(mx, lw[j])
+                        total_w = 0.0
+                        for j in range(G):
+                            w[j] = math.exp(lw[j] - mx)
+                            total_w += w[j]
+                        if translating:
+                            p1x, p1y, p1z = px + ux * T, py + uy * T, pz + uz * T
+                        else:
+                            p1x, p1y, p1z = px, py, pz
+                        update = tracked and s + 1 < steps
+                        lx = ly = lz = hx = hy = hz = 0.0
+                        for j in range(G):
+                            wj = w[j] / total_w
+                            lx += wj * kp[j, 0]
+                            ly += wj * kp[j, 1]
+                            lz += wj * kp[j, 2]
+                            vx, vy, vz, d1 = _rot_err(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz)
+                            hx += wj * vx
+                            hy += wj * vy
+                            hz += wj * vz
+                            if update and translating:
+                                lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
+                                                              tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                            elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
+                                d = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz)
+                                v, slope = _huber(d, hp[4], hp[5], hp[6], hp[7])
+                                v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
+                                lw[j] -= samples * rot_scale * (T * slope * math.sqrt(ux * ux + uy * uy + uz * uz)
+                                                                + v1 - v)
+                        lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
+                        hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
+                        if translating:
+                            rx, ry, rz, ox, oy, oz = lx, ly, lz, hx, hy, hz
+                        else:
+                            rx, ry, rz, ox, oy, oz = hx, hy, hz, lx, ly, lz
+                    elif kind[a] == MOVE:
+                        if translating:
+                            rx, ry, rz = _clip(g_t * (kp[t, 0] - px), g_t * (kp[t, 1] - py), g_t * (kp[t, 2] - pz), m_t)
+                        else:
+                            vx, vy, vz, _ = _rot_err(kq[t, 0], kq[t, 1], kq[t, 2], kq[t, 3], qw, qx, qy, qz)
+                            rx, ry, rz = _clip(g_r * vx, g_r * vy, g_r * vz, m_r)
+                    opposed = ((ux * rx < 0.0 and abs(ux) > th and abs(rx) > th)
+                               or (uy * ry < 0.0 and abs(uy) > th and abs(ry) > th)
+                               or (uz * rz < 0.0 and abs(uz) > th and abs(rz) > th))
+                    if s < watch_steps:
+                        for j in range(G):
+                            loglik[c, g, a, j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz,
+                                                                       ux, uy, uz, tw, tx, ty, tz, j, kp, kq, T, hp,
+                                                                       rot_scale)
+                    # the blend: the user's twist alone for no-assist
+                    if kind[a] == NONE:
+                        bx, by, bz = ux, uy, uz
+                    else:
+                        bx, by, bz = (1.0 - alpha) * ux + alpha * rx, (1.0 - alpha) * uy + alpha * ry, \
+                            (1.0 - alpha) * uz + alpha * rz
+                    if translating:
+                        px, py, pz = px + bx * dt, py + by * dt, pz + bz * dt
+                        if ho:
+                            qw, qx, qy, qz = _turn(qw, qx, qy, qz, alpha * ox, alpha * oy, alpha * oz, dt)
+                        else:
+                            qw, qx, qy, qz = shared[s + 1, 0], shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
+                    else:
+                        qw, qx, qy, qz = _turn(qw, qx, qy, qz, bx, by, bz, dt)
+                        if ho:
+                            px, py, pz = px + alpha * ox * dt, py + alpha * oy * dt, pz + alpha * oz * dt
+                        else:
+                            px, py, pz = shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
+                    if translating:
+                        d_r = _angle(qw, qx, qy, qz, gw, gx, gy, gz)
+                    else:  # the user's next error, and the angle to g
+                        ex, ey, ez, d_r = _rot_err(gw, gx, gy, gz, qw, qx, qy, qz)
+                    dpx, dpy, dpz = px - kp[g, 0], py - kp[g, 1], pz - kp[g, 2]
+                    r, reached, end = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail, approach)
+                    if not arrived:
+                        total += r * k + (per_step if opposed else 0.0) + (goal if reached else 0.0)
+                    arrived = arrived or reached
+                    value[c, g, a, s + 1] = total + (0.0 if arrived else end)
+                    if s + 1 == watch_steps:
+                        watch_p[c, g, a, 0], watch_p[c, g, a, 1], watch_p[c, g, a, 2] = px, py, pz
+                        watch_q[c, g, a, 0], watch_q[c, g, a, 1], watch_q[c, g, a, 2], watch_q[c, g, a, 3] = \
+                            qw, qx, qy, qz
+                        watch_ret[c, g, a] = total
+
+
+def roll_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...]) -> None:
+    """:func:`roll` with the user's goals split over ``threads`` threads (it releases the GIL): this thread
+    takes the first share, a process-wide pool the others. ``inputs`` are :func:`roll`'s inputs up to
+    ``rp``, ``outputs`` its six outputs. Each rollout is computed alone, so the outputs do not depend on
+    the split (the shared part a share needs it integrates itself)."""
+    G = len(inputs[3])  # kp
+    n = max(1, min(threads, G))
+    edges = np.linspace(0, G, n + 1).round().astype(int)
+
+    def share(i: int) -> None:
+        roll(*inputs, edges[i], edges[i + 1], *outputs)
+
+    futures = [_pool(n - 1).submit(share, i) for i in range(1, n)]
+    share(0)
+    for f in futures:
+        f.result()
+
+
+_POOL: list[tuple[int, ThreadPoolExecutor]] = []
+"""The process's rollout threads and their number (made on first use, replaced by a larger pool if asked)."""
+if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: it makes its own pool
+    os.register_at_fork(after_in_child=_POOL.clear)
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """The pool, with at least ``workers`` threads."""
+    if not _POOL or _POOL[0][0] < workers:
+        _POOL[:] = [(workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="sa-rollouts"))]
+    return _POOL[0][1]
+
+
+def cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def threads(cfg: Config) -> int:
+    """``planner.threads``, 0 read as one per core this process may use."""
+    return cfg.planner.threads or cores()
+
+
+def warm_up(cfg: Config) -> None:
+    """Compile :func:`roll` (first run on a machine: a few seconds) or load it from numba's cache, on a
+    one-start problem, so the first plan does not pay for it."""
+    if not supported(cfg):
+        return
+    kp, kq = np.array([[0.3, 0.0, 0.1], [0.3, 0.1, 0.1]]), np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+    fp, hp, rp = parameters(cfg, (0.05, 0.2), 1.0)
+    outputs = (np.empty((1, 2, 3, 3)), np.empty((1, 2)), np.empty((1, 2, 3, 3)), np.empty((1, 2, 3, 4)),
+               np.empty((1, 2, 3)), np.zeros((1, 2, 3, 2)))
+    roll(kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05,
+         np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp, 0, 2, *outputs)
+
+
+def supported(cfg: Config) -> bool:
+    """Whether :func:`roll` implements ``cfg``'s model (the default HO generator and step cost)."""
+    return cfg.ho.generator == "moves" and cfg.intent.step_cost == "path"
+
+
+def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``fp``, ``hp`` and ``rp`` of :func:`roll` from the configuration, the user's speed (m/s, rad/s) and
+    the rollout step (s)."""
+    rw, it, mv, alpha = cfg.reward, cfg.intent, cfg.move, cfg.blend.alpha
+    fp = np.array([speed[0], speed[1], cfg.planner.user_standoff_m, alpha, it.action_apply_time_s,
+                   rw.opposition_penalty * dt / rw.step_s, rw.opposition_threshold,
+                   cfg.runtime.belief_hz * dt * it.rationality, it.rotation_scale, dt / rw.step_s,
+                   cfg.planner.terminal_s / rw.step_s, mv.linear_gain, mv.linear_max_mps, mv.angular_gain,
+                   mv.angular_max_radps], dtype=float)
+    hp = np.array([it.translation.c, it.translation.delta, it.translation.a, it.translation.weight,
+                   it.rotation.c, it.rotation.delta, it.rotation.a, it.rotation.weight], dtype=float)
+    rp = np.array([rw.scale, rw.beta, rw.rotation_threshold_m, rw.goal_translation_m, rw.goal_rotation_rad, rw.goal,
+                   rw.step_s, alpha * mv.linear_max_mps + (1.0 - alpha) * speed[0],
+                   alpha * mv.angular_max_radps + (1.0 - alpha) * speed[1]], dtype=float)
+    return fp, hp, rp

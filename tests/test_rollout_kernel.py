@@ -1,0 +1,113 @@
+"""The compiled rollouts (``planner/kernel.py``) against the numpy form of the same model (``Rollouts``
+with ``compiled=False``), on random problems in every combination the kernel implements."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from sa_daemon.config import config_from_dict
+from sa_daemon.geometry import quat_normalize
+from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
+from sa_daemon.planner import kernel
+from sa_daemon.planner.rollouts import Rollouts
+
+FIELDS = ("value", "stay", "watch_positions", "watch_quats", "watch_return", "loglik")
+
+
+def _problem(rng: np.random.Generator, C: int = 3, G: int = 5):
+    """Random start poses near random goal poses (some within the goal's reach, so arrivals happen), a
+    random belief per start with one goal at zero, and moves to three goals with HO and no-assist."""
+    kp = rng.uniform([0.2, -0.3, 0.0], [0.5, 0.3, 0.3], (G, 3))
+    kq = quat_normalize(rng.normal(size=(G, 4)))
+    near = rng.integers(0, G, C)
+    positions = kp[near] + rng.normal(scale=[0.15, 0.15, 0.15], size=(C, 3))
+    positions[0] = kp[near[0]] + 0.004  # within the goal's translation tolerance
+    quats = quat_normalize(kq[near] + rng.normal(scale=0.4, size=(C, 4)))
+    quats[0] = kq[near[0]] * -1.0  # the same rotation, the other sign
+    weights = rng.dirichlet(np.ones(G), C)
+    weights[:, -1] = 0.0
+    weights /= weights.sum(axis=1, keepdims=True)
+    actions = [Action(ActionKind.MOVE, goal=g) for g in (0, 2, 3)] + [HO_ACTION, NO_ASSIST]
+    return positions, quats, weights, kp, kq, actions
+
+
+@pytest.mark.parametrize("mode, belief, terminal, watch_steps", list(itertools.product(
+    (Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2))))
+def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps):
+    cfg = config_from_dict({"planner": {"ho_belief": belief, "terminal": terminal},
+                            "intent": {"rotation_rationality": 200.0}}, "test")
+    assert kernel.supported(cfg)
+    rng = np.random.default_rng(7)
+    arrivals = 0
+    for trial in range(4):
+        positions, quats, weights, kp, kq, actions = _problem(rng)
+        speed, dt = (rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.4)), rng.uniform(0.3, 1.0)
+        R = [Rollouts(cfg, positions, quats, weights, kp, kq, actions, mode, speed, steps=4, dt=dt,
+                      watch_steps=watch_steps, compiled=compiled) for compiled in (False, True)]
+        arrivals += int(np.sum(np.diff(R[1].value, axis=-1) > 50.0))  # the +100 bonus net of a step's R_d
+        for field in FIELDS[:2] + (FIELDS[2:] if watch_steps else ()):
+            a, b = getattr(R[0], field), getattr(R[1], field)
+            assert a.shape == b.shape, field
+            # atol: 2 acos|<a, b>| near a zero angle turns a last-digit difference of the dot product into
+            # ~1e-8 rad, which the likelihood's samples x rationality multiply
+            assert np.allclose(a, b, rtol=1e-9, atol=1e-6), (trial, field, np.abs(a - b).max())
+        assert np.all(R[1].stay[0][R[1].value[0, :, 0, 0] == 0.0] == 0.0)
+    assert arrivals, "no rollout reached its goal: the bonus went untested"
+
+
+def test_the_options_the_kernel_does_not_implement_keep_the_numpy_form():
+    base = config_from_dict({}, "test")
+    assert kernel.supported(base)
+    gradient = config_from_dict({"ho": {"generator": "gradient"}}, "test")
+    time_cost = config_from_dict({"intent": {"step_cost": "time"}}, "test")
+    assert not kernel.supported(gradient) and not kernel.supported(time_cost)
+    rng = np.random.default_rng(3)
+    positions, quats, weights, kp, kq, actions = _problem(rng)
+    for cfg in (gradient, time_cost):
+        auto = Rollouts(cfg, positions, quats, weights, kp, kq, actions, Mode.TRANSLATION, (0.05, 0.0), 3, 1.0)
+        numpy_form = Rollouts(cfg, positions, quats, weights, kp, kq, actions, Mode.TRANSLATION, (0.05, 0.0), 3, 1.0,
+                              compiled=False)
+        assert np.array_equal(auto.value, numpy_form.value)
+
+
+def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
+    """``planner.threads`` splits the start poses; every start is computed alone, so the outputs are
+    bit for bit the same for any split (including more threads than starts)."""
+    rng = np.random.default_rng(11)
+    positions, quats, weights, kp, kq, actions = _problem(rng, C=7)
+    out = []
+    for threads in (1, 2, 3, 16):
+        cfg = config_from_dict({"planner": {"threads": threads}}, "test")
+        R = Rollouts(cfg, positions, quats, weights, kp, kq, actions, Mode.ROTATION, (0.03, 0.3), steps=4, dt=0.5,
+                     watch_steps=1)
+        out.append([getattr(R, f) for f in FIELDS])
+    for other in out[1:]:
+        for a, b in zip(out[0], other, strict=True):
+            assert np.array_equal(a, b)
+
+
+def test_threads_zero_means_one_per_usable_core():
+    assert kernel.threads(config_from_dict({}, "test")) == kernel.cores() >= 1
+    assert kernel.threads(config_from_dict({"planner": {"threads": 3}}, "test")) == 3
+
+
+def test_a_forked_child_makes_its_own_rollout_threads():
+    """After ``fork`` the parent's pool threads do not exist in the child; the child's rollouts must
+    still run (not wait for ever on a pool with no threads) and give the parent's result."""
+    import multiprocessing as mp
+
+    rng = np.random.default_rng(5)
+    problem = _problem(rng, C=4)
+    cfg = config_from_dict({"planner": {"threads": 2}}, "test")
+    parent = Rollouts(cfg, *problem, Mode.ROTATION, (0.03, 0.3), steps=3, dt=1.0).value  # the pool exists now
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        child = pool.apply_async(_rollout_values, (cfg, problem)).get(timeout=30)
+    assert np.array_equal(parent, child)
+
+
+def _rollout_values(cfg, problem):
+    return Rollouts(cfg, *problem, Mode.ROTATION, (0.03, 0.3), steps=3, dt=1.0).value
