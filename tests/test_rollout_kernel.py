@@ -74,8 +74,8 @@ def test_the_options_the_kernel_does_not_implement_keep_the_numpy_form():
 
 
 def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
-    """``planner.threads`` splits the start poses; every start is computed alone, so the outputs are
-    bit for bit the same for any split (including more threads than starts)."""
+    """``planner.threads`` splits the user's goals; every rollout is computed alone, so the outputs are
+    bit for bit the same for any split (including more threads than goals)."""
     rng = np.random.default_rng(11)
     positions, quats, weights, kp, kq, actions = _problem(rng, C=7)
     out = []

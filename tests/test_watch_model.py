@@ -80,32 +80,43 @@ def test_rollouts_standing_still_earn_the_stay_reward_each_step_and_a_move_gains
     assert R.loglik.shape == (1, len(goals), 3, len(goals))
 
 
-@pytest.mark.parametrize("speed", [(0.0, 0.0), (0.0, 0.2)])
-def test_a_rollout_that_has_not_arrived_is_worth_the_approach_still_to_go(speed):
-    """``planner.terminal = "approach"``: standing still for ``s`` steps is worth ``s`` stays plus
-    the return of finishing the approach from the start pose, at ``alpha`` x the move's top speed plus
-    ``1 - alpha`` x the user's in each part; the ``"fixed"`` form charges ``R_d`` there for ``terminal_s``."""
+def _standing_rollouts(terminal: str, speed: tuple[float, float]):
+    """No-assist from Scene 1's start in rotation mode, 3 steps of 0.5 s, under ``planner.terminal``; with
+    the distances of the start to every goal's ``k_c``."""
     goals = _snap().goals
     kp, kq = goals.desired_poses(SCENE.start, 0.05)
     p, q = SCENE.start.position, SCENE.start.quat_wxyz
-    for terminal in ("approach", "fixed"):
-        cfg = _cfg(terminal=terminal)
-        R = Rollouts(cfg, p[None], q[None], np.full((1, len(goals)), 1.0 / len(goals)), kp, kq, [NO_ASSIST],
-                     Mode.ROTATION, speed, steps=3, dt=0.5)
-        d_t, d_r = np.linalg.norm(kp - p, axis=1), quat_angle(kq, q)
-        if terminal == "approach":
-            a = cfg.blend.alpha
-            end = approach_return(d_t, d_r, a * cfg.move.linear_max_mps + (1 - a) * speed[0],
-                                  a * cfg.move.angular_max_radps + (1 - a) * speed[1], cfg.reward)
-        else:
-            end = R.stay[0] / (0.5 / cfg.reward.step_s) * (cfg.planner.terminal_s / cfg.reward.step_s)
-        if speed == (0.0, 0.0):  # nothing moves: each step earns the stay
-            assert np.allclose(R.value[0, :, 0, :], end[:, None] + np.arange(4)[None] * R.stay[0][:, None])
-        else:  # a faster turn still to go (the user's share) makes the approach cheaper
-            slower = approach_return(d_t, d_r, 0.5 * cfg.move.linear_max_mps, 0.5 * cfg.move.angular_max_radps,
-                                     cfg.reward)
-            assert terminal == "fixed" or np.all(end >= slower - 1e-9)
-            assert np.allclose(R.value[0, :, 0, 0], end)
+    cfg = _cfg(terminal=terminal)
+    R = Rollouts(cfg, p[None], q[None], np.full((1, len(goals)), 1.0 / len(goals)), kp, kq, [NO_ASSIST],
+                 Mode.ROTATION, speed, steps=3, dt=0.5)
+    return cfg, R, np.linalg.norm(kp - p, axis=1), quat_angle(kq, q)
+
+
+@pytest.mark.parametrize("speed", [(0.0, 0.0), (0.0, 0.2)])
+def test_a_rollout_that_has_not_arrived_is_worth_the_approach_still_to_go(speed):
+    """``planner.terminal = "approach"``: standing still for ``s`` steps is worth ``s`` stays plus the
+    return of finishing the approach from the start pose, at ``alpha`` x the move's top speed plus
+    ``1 - alpha`` x the user's in each part; a user turning too makes what is still to go cheaper."""
+    cfg, R, d_t, d_r = _standing_rollouts("approach", speed)
+    a = cfg.blend.alpha
+    end = approach_return(d_t, d_r, a * cfg.move.linear_max_mps + (1 - a) * speed[0],
+                          a * cfg.move.angular_max_radps + (1 - a) * speed[1], cfg.reward)
+    assert np.allclose(R.value[0, :, 0, 0], end)
+    if speed == (0.0, 0.0):  # nothing moves: each step earns the stay
+        assert np.allclose(R.value[0, :, 0, :], end[:, None] + np.arange(4)[None] * R.stay[0][:, None])
+    else:
+        robot_alone = approach_return(d_t, d_r, a * cfg.move.linear_max_mps, a * cfg.move.angular_max_radps,
+                                      cfg.reward)
+        assert np.all(end >= robot_alone - 1e-9) and np.any(end > robot_alone + 1.0)
+
+
+def test_the_fixed_terminal_charges_the_last_pose_for_terminal_s():
+    """``planner.terminal = "fixed"`` (default): the pose at the horizon is charged ``R_d`` for
+    ``terminal_s`` more; standing still, that is the stay scaled from one rollout step to ``terminal_s``."""
+    cfg, R, _, _ = _standing_rollouts("fixed", (0.0, 0.0))
+    end = R.stay[0] / (0.5 / cfg.reward.step_s) * (cfg.planner.terminal_s / cfg.reward.step_s)
+    assert np.all(end < 0.0)
+    assert np.allclose(R.value[0, :, 0, :], end[:, None] + np.arange(4)[None] * R.stay[0][:, None])
 
 
 def test_watch_search_values_every_root_action_and_picks_the_best():

@@ -135,7 +135,8 @@ def _reward(d_t, d_r, rp, tail, approach):
 def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, tracked, approach,
          steps, watch_steps, dt, fp, hp, rp, g_lo, g_hi,
          value, stay, watch_p, watch_q, watch_ret, loglik):
-    """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``).
+    """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``)
+    for the user's goals ``g_lo`` to ``g_hi - 1`` (the share of one thread, :func:`roll_split`).
 
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
