@@ -101,7 +101,7 @@ def _check_state(s: dict) -> None:
     assert s["arm"] == {"backend": "kinematic", "fault": None}
     assert s["input"]["backend"] == "sim" and s["input"]["connected"] is True
     assert isinstance(s["input"]["fresh"], bool)
-    assert s["task"] == "cup:top"
+    assert s["task"] in (None, "cup:top")  # None until the daemon is ready: the simulated user starts then
 
 
 def test_state_messages_at_least_20_hz_with_the_documented_fields(policy):
@@ -117,6 +117,9 @@ def test_state_messages_at_least_20_hz_with_the_documented_fields(policy):
     span = ts[-1] - ts[0]
     assert (len(ts) - 1) / span >= 20.0, f"{len(ts)} states in {span:.2f} s"
     assert {s["planner"]["pid"] for s in states} != {None}
+    i_ready, _ = c.event("ready")
+    after = c.slice(i_ready, topic="state")
+    assert after and all(s["task"] == "cup:top" for s in after)
 
 
 def test_status_command_reports_the_documented_fields(policy):
@@ -389,6 +392,12 @@ def test_sigterm_stops_cleanly_and_leaves_a_plottable_recording(tmp_path):
     assert len(states) > 100 and kinds[-1] == "stopped" and events[-1]["code"] == 0
     assert {"type": "shutdown", "reason": "SIGTERM"}.items() <= events[kinds.index("shutdown")].items()
     assert {"ready", "planner_ready", "task"} <= {e["type"] for e in events}
+    # the simulated user's first task begins once the daemon is ready: its hand is off the stick before
+    assert kinds.index("task") > kinds.index("ready")
+    first_task_t = events[kinds.index("task")]["t"]
+    early = [s for s in states if s["t"] < first_task_t]
+    assert early and not any(any(s["user_twist"]) for s in early)
+    assert any(any(s["user_twist"]) for s in states if s["t"] >= first_task_t)
     ts = [s["t"] for s in states]
     assert ts == sorted(ts) and ts[-1] >= 2.0 - 0.1  # up to the last control tick before the signal
     assert sum(states[-1]["belief"].values()) == pytest.approx(1.0, abs=1e-6)

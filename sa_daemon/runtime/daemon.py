@@ -122,6 +122,11 @@ class Daemon:
     def tasks_done(self) -> list[dict[str, Any]]:
         return self.sim.done if self.sim is not None else []
 
+    @property
+    def ready(self) -> bool:
+        """READY has been announced: the planner worker, speech and voice are up and the loops run."""
+        return self._ready_sent
+
     def event(self, kind: str, **fields: Any) -> None:
         """Publish and record an event (``docs/protocol.md`` lists the kinds)."""
         msg = {"t": round(self.now(), 4), "type": kind, **fields}
@@ -397,6 +402,8 @@ class Daemon:
             if opts.profile is not None:
                 log.info("profile %s (%s): %s", opts.profile["name"], opts.profile["path"], ", ".join(opts.profile["keys"]))
                 self.event("profile", **opts.profile)
+            if self.sim is not None and self.arm_state is not None:
+                self.sim.begin()  # the simulated user's first task starts with the ready daemon (else at its first tick)
             waiters = [asyncio.create_task(self._stop_event.wait())] + tasks
             timeout = opts.duration_s
             done, _ = await asyncio.wait(waiters, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)

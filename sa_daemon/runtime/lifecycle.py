@@ -80,7 +80,6 @@ def start_components(d: Daemon) -> None:
     d.planner_status = WorkerStatus.STARTING
     if opts.input == "sim":
         d.sim = SimTasks(d, SimInput(opts.scene, opts.tasks, cfg, 1.0 / cfg.runtime.belief_hz, opts.seed))
-        d.sim.begin()
 
 
 def _viz_json_topics() -> dict:

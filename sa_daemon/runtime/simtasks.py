@@ -44,9 +44,15 @@ class SimTasks:
         d.event("task", task=self.sim.task)
 
     def tick(self, mono: float) -> None:
-        """One belief tick of the user (``mono``: ``time.monotonic()`` s)."""
+        """One belief tick of the user (``mono``: ``time.monotonic()`` s). The first task begins once the
+        daemon is ready (planner worker, speech and voice up): until then the user's hand is off the stick,
+        so a task's time and assistance are those of the running daemon, not of its start-up."""
         d, sim = self._d, self.sim
         assert d.arm_state is not None
+        if sim.task is None:  # the daemon begins the first task as it announces ready, if the arm was up
+            if not d.ready:
+                return
+            self.begin()
         if self._next_at is not None:
             if mono >= self._next_at:
                 self._turn_over()
