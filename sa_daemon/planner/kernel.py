@@ -14,8 +14,9 @@ pre-grasp point first in translation), the robot's twist (move-to-goal toward it
 generator applied to the belief-weighted mean error at the pose the user's twist reaches in
 ``action_apply_time_s``; no-assist none), the blend, section III-E's reward. The part the user does not
 drive moves by the robot's share alone, so for moves and no-assist it does not depend on ``g``: it is
-integrated once per ``(c, a)`` and shared. HO carries its whole pose and, tracked, its own belief per
-``(c, g)``. Units: m, rad, s, m/s, rad/s; rewards in the paper's units.
+integrated once per ``(c, a)`` and shared; what every action's rollouts share at step 0 (the user's error
+and the reward toward each goal, HO's weights and its goals' angles) is computed once per start. HO
+carries its whole pose and, tracked, its own belief per ``(c, g)``. Units: m, rad, s, m/s, rad/s; rewards in the paper's units.
 """
 
 from __future__ import annotations
@@ -152,7 +153,41 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     shared = np.empty((steps + 1, 4))  # the part the user does not drive, per (c, a) for moves and no-assist
     lw = np.empty(G)
     w = np.empty(G)
+    # per start, what every action's rollouts share at step 0: toward each goal the user's error, the
+    # reward and its value after the horizon; HO's weights and, turning, its goals' angles and values
+    s_err = np.empty((G, 3))
+    s_r = np.empty(G)
+    s_end = np.empty(G)
+    s_arr = np.empty(G, dtype=np.bool_)
+    w0 = np.empty(G)
+    v0 = np.empty(G)
+    sl0 = np.empty(G)
+    has_ho = False
+    for a in range(A):
+        has_ho = has_ho or kind[a] == HO
     for c in range(C):
+        qw, qx, qy, qz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
+        for g in range(g_lo, g_hi):
+            # rotation mode: the error the user drives along, whose norm is the angle to g
+            s_err[g, 0], s_err[g, 1], s_err[g, 2], d_r = _rot_err(kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3],
+                                                                  qw, qx, qy, qz)
+            if translating:
+                d_r = _angle(qw, qx, qy, qz, kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3])
+            dpx, dpy, dpz = positions[c, 0] - kp[g, 0], positions[c, 1] - kp[g, 1], positions[c, 2] - kp[g, 2]
+            s_r[g], s_arr[g], s_end[g] = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail,
+                                                 approach)
+            stay[c, g] = 0.0 if s_arr[g] else s_r[g] * k
+        if has_ho:
+            mx = log_w0[c, 0]
+            for j in range(1, G):
+                mx = max(mx, log_w0[c, j])
+            total_w0 = 0.0
+            for j in range(G):
+                w0[j] = math.exp(log_w0[c, j] - mx)
+                total_w0 += w0[j]
+                if tracked and not translating:
+                    v0[j], sl0[j] = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
+                                           hp[4], hp[5], hp[6], hp[7])
         for a in range(A):
             ho = kind[a] == HO
             t = targets[a]
@@ -181,15 +216,9 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                 if ho:
                     for j in range(G):
                         lw[j] = log_w0[c, j]
-                # rotation mode: the error the user drives along, whose norm is the angle to g
-                ex, ey, ez, d_r = _rot_err(gw, gx, gy, gz, qw, qx, qy, qz)
-                if translating:
-                    d_r = _angle(qw, qx, qy, qz, gw, gx, gy, gz)
-                dpx, dpy, dpz = px - kp[g, 0], py - kp[g, 1], pz - kp[g, 2]
-                r, arrived, end = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail, approach)
-                value[c, g, a, 0] = 0.0 if arrived else end
-                if a == 0:
-                    stay[c, g] = 0.0 if arrived else r * k
+                ex, ey, ez = s_err[g, 0], s_err[g, 1], s_err[g, 2]
+                arrived = s_arr[g]
+                value[c, g, a, 0] = 0.0 if arrived else s_end[g]
                 total = 0.0
                 for s in range(steps):
                     # the user's twist toward g, in the driven part
@@ -206,13 +235,17 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                     # the robot's twist: driven part (rx, ry, rz), undriven part (ox, oy, oz)
                     rx = ry = rz = ox = oy = oz = 0.0
                     if ho:
-                        mx = lw[0]
-                        for j in range(1, G):
-                            mx = max(mx, lw[j])
-                        total_w = 0.0
-                        for j in range(G):
-                            w[j] = math.exp(lw[j] - mx)
-                            total_w += w[j]
+                        if s == 0:  # the start's belief, the same for every goal
+                            ws, total_w = w0, total_w0
+                        else:
+                            mx = lw[0]
+                            for j in range(1, G):
+                                mx = max(mx, lw[j])
+                            total_w = 0.0
+                            for j in range(G):
+                                w[j] = math.exp(lw[j] - mx)
+                                total_w += w[j]
+                            ws = w
                         if translating:
                             p1x, p1y, p1z = px + ux * T, py + uy * T, pz + uz * T
                         else:
@@ -220,7 +253,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                         update = tracked and s + 1 < steps
                         lx = ly = lz = hx = hy = hz = 0.0
                         for j in range(G):
-                            wj = w[j] / total_w
+                            wj = ws[j] / total_w
                             lx += wj * kp[j, 0]
                             ly += wj * kp[j, 1]
                             lz += wj * kp[j, 2]
@@ -232,8 +265,11 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                 lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
                                                               tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
                             elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
-                                d = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz)
-                                v, slope = _huber(d, hp[4], hp[5], hp[6], hp[7])
+                                if s == 0:
+                                    v, slope = v0[j], sl0[j]
+                                else:
+                                    v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
+                                                      hp[4], hp[5], hp[6], hp[7])
                                 v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
                                 lw[j] -= samples * rot_scale * (T * slope * math.sqrt(ux * ux + uy * uy + uz * uz)
                                                                 + v1 - v)
