@@ -111,3 +111,14 @@ def test_a_forked_child_makes_its_own_rollout_threads():
 
 def _rollout_values(cfg, problem):
     return Rollouts(cfg, *problem, Mode.ROTATION, (0.03, 0.3), steps=3, dt=1.0).value
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_without_watched_steps_the_watch_arrays_are_empty_in_both_forms(compiled):
+    """No watched steps: nothing to read there (not an uninitialised buffer), in either form."""
+    rng = np.random.default_rng(2)
+    positions, quats, weights, kp, kq, actions = _problem(rng)
+    R = Rollouts(config_from_dict({}, "test"), positions, quats, weights, kp, kq, actions, Mode.ROTATION,
+                 (0.03, 0.3), steps=3, dt=1.0, compiled=compiled)
+    assert all(getattr(R, f).size == 0 for f in FIELDS[2:])
+    assert R.value.shape == (3, 5, 5, 4) and np.all(np.isfinite(R.value))

@@ -151,6 +151,14 @@ def ho_twist(weights: FloatArray, gradients: FloatArray) -> FloatArray:
     return np.einsum("...g,...gj->...j", w, gradients) / np.sum(w, axis=-1, keepdims=True)
 
 
+def assisted_speeds(cfg: Config, user_speed: tuple[float, float]) -> tuple[float, float]:
+    """The speed of an assisted approach, per part: ``alpha`` x the move generator's top speed plus
+    ``1 - alpha`` x the user's (``user_speed``: m/s, rad/s). Returns (m/s, rad/s)."""
+    a = cfg.blend.alpha
+    return (a * cfg.move.linear_max_mps + (1.0 - a) * user_speed[0],
+            a * cfg.move.angular_max_radps + (1.0 - a) * user_speed[1])
+
+
 def blend(user_twist: FloatArray, robot_twist: FloatArray, cfg: BlendConfig) -> FloatArray:
     """``(1 - alpha) a_h + alpha a_r``."""
     return (1.0 - cfg.alpha) * np.asarray(user_twist) + cfg.alpha * np.asarray(robot_twist)

@@ -30,6 +30,7 @@ from numba import njit
 
 from ..config import Config
 from ..geometry import FloatArray
+from ..model.twists import assisted_speeds
 
 MOVE, HO, NONE = 0, 1, 2
 """Action kinds as the kernel reads them."""
@@ -91,6 +92,14 @@ def _huber(d, c, delta, a, weight):
     return weight * ((c + a) * d - 0.5 * c * delta), weight * (c + a)
 
 
+@njit(cache=True, inline="always")
+def _turn_cost(v, slope, d1, speed, T, hp):
+    """``Q - V`` of a turn at ``speed`` (rad/s) for ``T`` (s) from the angle whose Huber value and slope
+    are ``v``, ``slope`` to the angle ``d1`` after it (path step cost), before the rotation part's scale."""
+    v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
+    return T * slope * speed + v1 - v
+
+
 @njit(cache=True)
 def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, tz, j,
                kp, kq, T, hp, rot_scale):
@@ -105,11 +114,9 @@ def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, 
         v, slope = _huber(d, hp[0], hp[1], hp[2], hp[3])
         v1, _ = _huber(d1, hp[0], hp[1], hp[2], hp[3])
         return T * slope * speed + v1 - v
-    d = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz)
-    d1 = _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz)
-    v, slope = _huber(d, hp[4], hp[5], hp[6], hp[7])
-    v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
-    return rot_scale * (T * slope * speed + v1 - v)
+    v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz), hp[4], hp[5], hp[6], hp[7])
+    return rot_scale * _turn_cost(v, slope, _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz), speed,
+                                  T, hp)
 
 
 @njit(cache=True)
@@ -168,11 +175,11 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     for c in range(C):
         qw, qx, qy, qz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
         for g in range(g_lo, g_hi):
-            # rotation mode: the error the user drives along, whose norm is the angle to g
-            s_err[g, 0], s_err[g, 1], s_err[g, 2], d_r = _rot_err(kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3],
-                                                                  qw, qx, qy, qz)
             if translating:
                 d_r = _angle(qw, qx, qy, qz, kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3])
+            else:  # the error the user drives along, whose norm is the angle to g
+                s_err[g, 0], s_err[g, 1], s_err[g, 2], d_r = _rot_err(kq[g, 0], kq[g, 1], kq[g, 2], kq[g, 3],
+                                                                      qw, qx, qy, qz)
             dpx, dpy, dpz = positions[c, 0] - kp[g, 0], positions[c, 1] - kp[g, 1], positions[c, 2] - kp[g, 2]
             s_r[g], s_arr[g], s_end[g] = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail,
                                                  approach)
@@ -251,6 +258,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                         else:
                             p1x, p1y, p1z = px, py, pz
                         update = tracked and s + 1 < steps
+                        speed = math.sqrt(ux * ux + uy * uy + uz * uz)
                         lx = ly = lz = hx = hy = hz = 0.0
                         for j in range(G):
                             wj = ws[j] / total_w
@@ -270,9 +278,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                 else:
                                     v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
                                                       hp[4], hp[5], hp[6], hp[7])
-                                v1, _ = _huber(d1, hp[4], hp[5], hp[6], hp[7])
-                                lw[j] -= samples * rot_scale * (T * slope * math.sqrt(ux * ux + uy * uy + uz * uz)
-                                                                + v1 - v)
+                                lw[j] -= samples * rot_scale * _turn_cost(v, slope, d1, speed, T, hp)
                         lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
                         hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
                         if translating:
@@ -394,6 +400,7 @@ def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[Floa
     """``fp``, ``hp`` and ``rp`` of :func:`roll` from the configuration, the user's speed (m/s, rad/s) and
     the rollout step (s)."""
     rw, it, mv, alpha = cfg.reward, cfg.intent, cfg.move, cfg.blend.alpha
+    v_t, v_r = assisted_speeds(cfg, speed)
     fp = np.array([speed[0], speed[1], cfg.planner.user_standoff_m, alpha, it.action_apply_time_s,
                    rw.opposition_penalty * dt / rw.step_s, rw.opposition_threshold,
                    cfg.runtime.belief_hz * dt * it.rationality, it.rotation_scale, dt / rw.step_s,
@@ -402,6 +409,5 @@ def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[Floa
     hp = np.array([it.translation.c, it.translation.delta, it.translation.a, it.translation.weight,
                    it.rotation.c, it.rotation.delta, it.rotation.a, it.rotation.weight], dtype=float)
     rp = np.array([rw.scale, rw.beta, rw.rotation_threshold_m, rw.goal_translation_m, rw.goal_rotation_rad, rw.goal,
-                   rw.step_s, alpha * mv.linear_max_mps + (1.0 - alpha) * speed[0],
-                   alpha * mv.angular_max_radps + (1.0 - alpha) * speed[1]], dtype=float)
+                   rw.step_s, v_t, v_r], dtype=float)
     return fp, hp, rp

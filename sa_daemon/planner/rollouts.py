@@ -30,7 +30,7 @@ Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 reference. :mod:`.kernel` computes the same rollouts compiled (numba), one fused loop per rollout,
 split over ``planner.threads`` threads, 2-3x faster; :class:`Rollouts` uses it wherever it implements
 the configuration (:func:`.kernel.supported`: the default HO generator and step cost), and the tests
-hold the two equal on random problems. ``loglik`` is empty (last axis 0) without watched steps.
+hold the two equal on random problems. Without watched steps the watch arrays and ``loglik`` are empty.
 
 **Separation.** Every velocity generator's linear part depends on the position alone and its angular
 part on the orientation alone, and the user drives one of the two. So in translation mode the
@@ -50,6 +50,7 @@ from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import q_minus_v_driven
 from ..model.reward import approach_return, distance_reward, opposes
 from ..model.twists import (
+    assisted_speeds,
     ho_angular,
     ho_linear,
     move_angular,
@@ -113,11 +114,11 @@ class Rollouts:
         rot_scale = cfg.intent.rotation_scale  # the tracker's weight of the rotation part
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
+        self._no_watch(C, G, A)
         loglik = np.zeros((C, G, A, G if watch_steps else 0))
 
         tail = cfg.planner.terminal_s / cfg.reward.step_s  # the state at the horizon lasts this many paper steps
-        v_t = alpha * cfg.move.linear_max_mps + (1.0 - alpha) * speed[0]  # the assisted approach (m/s, rad/s)
-        v_r = alpha * cfg.move.angular_max_radps + (1.0 - alpha) * speed[1]
+        v_t, v_r = assisted_speeds(cfg, speed)  # the approach after the horizon (m/s, rad/s)
         approach = cfg.planner.terminal == "approach"
 
         def reward_at() -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -190,6 +191,13 @@ class Rollouts:
                 self.watch_return = total.copy()  # the return so far, without the terminal charge
         self.loglik = loglik
 
+    def _no_watch(self, C: int, G: int, A: int) -> None:
+        """The watch arrays without watched steps: empty, ``(C, G, 0, ...)``."""
+        self.watch_positions = np.empty((C, G, 0, 3))
+        self.watch_quats = np.empty((C, G, 0, 4))
+        self.watch_return = np.empty((C, G, 0))
+        self.loglik = np.zeros((C, G, A, 0))
+
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
                   kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float], steps: int,
                   dt: float, watch_steps: int) -> None:
@@ -201,10 +209,13 @@ class Rollouts:
         fp, hp, rp = kernel.parameters(cfg, speed, dt)
         self.value = np.empty((C, G, A, steps + 1))
         self.stay = np.empty((C, G))
-        self.watch_positions = np.empty((C, G, A, 3))
-        self.watch_quats = np.empty((C, G, A, 4))
-        self.watch_return = np.empty((C, G, A))
-        self.loglik = np.zeros((C, G, A, G if watch_steps else 0))
+        if watch_steps:  # filled by the kernel
+            self.watch_positions = np.empty((C, G, A, 3))
+            self.watch_quats = np.empty((C, G, A, 4))
+            self.watch_return = np.empty((C, G, A))
+            self.loglik = np.zeros((C, G, A, G))
+        else:
+            self._no_watch(C, G, A)
         inputs = (np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(quats, dtype=float),
                   np.log(np.maximum(np.asarray(weights, dtype=float), 1e-300)),
                   np.ascontiguousarray(kp, dtype=float), np.ascontiguousarray(kq, dtype=float),
