@@ -186,7 +186,7 @@ class PlannerConfig(_Section):
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(
         0, ge=0, le=64,
-        description="watch model: threads the compiled rollouts split the user's goals over (the results do not "
+        description="watch model: threads the compiled rollouts are split over (the results do not "
         "depend on it); 0 = one per core this process may use. The evaluation gives each of its jobs its share",
     )
     ho_belief: Literal["tracked", "fixed"] = Field(

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import config_from_dict
+from sa_daemon.cores import cores
 from sa_daemon.geometry import quat_normalize
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
 from sa_daemon.planner import kernel
@@ -17,11 +18,15 @@ from sa_daemon.planner.rollouts import Rollouts
 FIELDS = ("value", "stay", "watch_positions", "watch_quats", "watch_return", "loglik")
 
 
-def _problem(rng: np.random.Generator, C: int = 3, G: int = 5):
+def _problem(rng: np.random.Generator, C: int = 3, G: int = 5, twins: bool = False):
     """Random start poses near random goal poses (some within the goal's reach, so arrivals happen), a
-    random belief per start with one goal at zero, and moves to three goals with HO and no-assist."""
+    random belief per start with one goal at zero, and moves to three goals with HO and no-assist. With
+    ``twins`` goals 3 and 4 have the orientations of goals 1 and 0 (other positions), as grasps of one kind
+    on different objects do: turning, the kernel computes such a goal's path once."""
     kp = rng.uniform([0.2, -0.3, 0.0], [0.5, 0.3, 0.3], (G, 3))
     kq = quat_normalize(rng.normal(size=(G, 4)))
+    if twins:
+        kq[3], kq[4] = kq[1], kq[0]
     near = rng.integers(0, G, C)
     positions = kp[near] + rng.normal(scale=[0.15, 0.15, 0.15], size=(C, 3))
     positions[0] = kp[near[0]] + 0.004  # within the goal's translation tolerance
@@ -37,13 +42,13 @@ def _problem(rng: np.random.Generator, C: int = 3, G: int = 5):
 @pytest.mark.parametrize("mode, belief, terminal, watch_steps", list(itertools.product(
     (Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2))))
 def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps):
-    cfg = config_from_dict({"planner": {"ho_belief": belief, "terminal": terminal},
+    cfg = config_from_dict({"planner": {"ho_belief": belief, "terminal": terminal, "threads": 1},  # one block
                             "intent": {"rotation_rationality": 200.0}}, "test")
     assert kernel.supported(cfg)
     rng = np.random.default_rng(7)
     arrivals = 0
     for trial in range(4):
-        positions, quats, weights, kp, kq, actions = _problem(rng)
+        positions, quats, weights, kp, kq, actions = _problem(rng, twins=trial % 2 == 1)
         speed, dt = (rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.4)), rng.uniform(0.3, 1.0)
         R = [Rollouts(cfg, positions, quats, weights, kp, kq, actions, mode, speed, steps=4, dt=dt,
                       watch_steps=watch_steps, compiled=compiled) for compiled in (False, True)]
@@ -74,10 +79,12 @@ def test_the_options_the_kernel_does_not_implement_keep_the_numpy_form():
 
 
 def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
-    """``planner.threads`` splits the user's goals; every rollout is computed alone, so the outputs are
-    bit for bit the same for any split (including more threads than goals)."""
+    """``planner.threads`` splits the starts or the user's goals into blocks; every rollout is computed
+    alone, so the outputs are bit for bit the same for any split (including more threads than goals: one
+    goal a block, so a goal whose orientation twin is in another block computes its path in full, which
+    must equal the copy it takes with one thread)."""
     rng = np.random.default_rng(11)
-    positions, quats, weights, kp, kq, actions = _problem(rng, C=7)
+    positions, quats, weights, kp, kq, actions = _problem(rng, C=7, twins=True)
     out = []
     for threads in (1, 2, 3, 16):
         cfg = config_from_dict({"planner": {"threads": threads}}, "test")
@@ -90,7 +97,7 @@ def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
 
 
 def test_threads_zero_means_one_per_usable_core():
-    assert kernel.threads(config_from_dict({}, "test")) == kernel.cores() >= 1
+    assert kernel.threads(config_from_dict({}, "test")) == cores() >= 1
     assert kernel.threads(config_from_dict({"planner": {"threads": 3}}, "test")) == 3
 
 

@@ -4,12 +4,12 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 from ..arm.backends import SIMULATED_BACKENDS
 from ..config import METHODS, Config, ConfigError, load_config
+from ..cores import cores
 from ..extras import MissingExtra
 from ..sim.suites import SUITES
 from ..sim.users import builtin_user_names
@@ -181,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "summary and the paired tests (repeatable; a trial measured twice is refused)")
     e.add_argument("--json", help="write trials and summary to this file")
     e.add_argument("--plots", help="write a Fig. 4 timeline per trial and Fig. 7 bar charts to this folder")
-    e.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    e.add_argument("--jobs", type=int, default=cores(), help="worker processes (default: one per usable core)")
     e.add_argument("--arm", choices=SIMULATED_BACKENDS, default="kinematic",
                    help="kinematic: exact twist integration; mujoco: physics, success also needs a lift")
     e.add_argument("--backend", choices=("local", "ray"), default="local",
@@ -202,7 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     bv = bsub.add_parser("voice", help="answer recognition and false-accept rates on espeak-ng speech")
     bv.add_argument("--json", help="write the figures and every utterance's result to this file")
     bv.add_argument("--min-confidence", type=float, help="default: voice.min_confidence")
-    bv.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    bv.add_argument("--jobs", type=int, default=cores(), help="worker processes (default: one per usable core)")
     bv.add_argument("--third-answer", action="store_true",
                     help='with the third answer ("other grasp", asking.third_answer) and its phrases')
     bv.set_defaults(func=cmd_bench_voice)

@@ -16,11 +16,18 @@ generator applied to the belief-weighted mean error at the pose the user's twist
 drive moves by the robot's share alone, so for moves and no-assist it does not depend on ``g``: it is
 integrated once per ``(c, a)`` and shared; what every action's rollouts share at step 0 (the user's error
 and the reward toward each goal, HO's weights and its goals' angles) is computed once per start. HO
-carries its whole pose and, tracked, its own belief per ``(c, g)``. Units: m, rad, s, m/s, rad/s; rewards in the paper's units.
+carries its whole pose and, tracked, its own belief per ``(c, g)``. Goals often share an orientation (one
+grasp kind on several objects): HO's error, angle and Huber value toward each orientation are computed once
+per orientation, and turning (rotation mode), where the user drives the orientation alone and by the
+goal's orientation alone, a goal whose orientation an earlier goal has (its *twin*) follows that goal's
+path exactly: the path is integrated once and the twin takes only its own rewards. This gives the same
+numbers as computing every rollout in full (the tests hold it bit for bit). Units: m, rad, s, m/s, rad/s;
+rewards in the paper's units.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -29,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..config import Config
+from ..cores import cores
 from ..geometry import FloatArray
 from ..model.twists import assisted_speeds
 
@@ -139,12 +147,27 @@ def _reward(d_t, d_r, rp, tail, approach):
     return r, reached, -scale * steps * (1.0 - mean_left) - scale / _TWO_PI * d_r * steps * m * m / 2.0 + rp[5]
 
 
+@njit(cache=True)
+def _first_same(kq):
+    """For each goal the first goal with the same orientation (goals often share one: what HO computes
+    from a goal's orientation alone is computed once per orientation, the same numbers)."""
+    G = kq.shape[0]
+    first = np.arange(G)
+    for j in range(G):
+        for i in range(j):
+            if kq[i, 0] == kq[j, 0] and kq[i, 1] == kq[j, 1] and kq[i, 2] == kq[j, 2] and kq[i, 3] == kq[j, 3]:
+                first[j] = i
+                break
+    return first
+
+
 @njit(cache=True, nogil=True)
 def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, tracked, approach,
-         steps, watch_steps, dt, fp, hp, rp, g_lo, g_hi,
+         steps, watch_steps, dt, fp, hp, rp, c_lo, c_hi, g_lo, g_hi,
          value, stay, watch_p, watch_q, watch_ret, loglik):
     """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``)
-    for the user's goals ``g_lo`` to ``g_hi - 1`` (the share of one thread, :func:`roll_split`).
+    for the starts ``c_lo`` to ``c_hi - 1`` and the user's goals ``g_lo`` to ``g_hi - 1`` (one block of
+    :func:`roll_split`).
 
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
@@ -152,7 +175,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     ``hp``: the translation and rotation Huber ``c, delta, a, weight``. ``kind``/``targets``: per action
     its kind and, for moves, its goal.
     """
-    C, G, A = positions.shape[0], kp.shape[0], kind.shape[0]
+    G, A = kp.shape[0], kind.shape[0]
     sp_t, sp_r, standoff, alpha, T = fp[0], fp[1], fp[2], fp[3], fp[4]
     per_step, th, samples, rot_scale, k, tail = fp[5], fp[6], fp[7], fp[8], fp[9], fp[10]
     g_t, m_t, g_r, m_r = fp[11], fp[12], fp[13], fp[14]
@@ -169,10 +192,13 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     w0 = np.empty(G)
     v0 = np.empty(G)
     sl0 = np.empty(G)
+    rot = np.empty((G, 6))  # HO, per step and goal orientation: error after the user's turn, its angle, V and slope
+    same_q = _first_same(kq)
+    path = np.empty((G, steps, 9))  # turning, per rollout and step: position, quaternion, angle to g, opposed
     has_ho = False
     for a in range(A):
         has_ho = has_ho or kind[a] == HO
-    for c in range(C):
+    for c in range(c_lo, c_hi):
         qw, qx, qy, qz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
         for g in range(g_lo, g_hi):
             if translating:
@@ -192,7 +218,9 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
             for j in range(G):
                 w0[j] = math.exp(log_w0[c, j] - mx)
                 total_w0 += w0[j]
-                if tracked and not translating:
+                if tracked and not translating and same_q[j] < j:
+                    v0[j], sl0[j] = v0[same_q[j]], sl0[same_q[j]]
+                elif tracked and not translating:
                     v0[j], sl0[j] = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
                                            hp[4], hp[5], hp[6], hp[7])
         for a in range(A):
@@ -227,100 +255,123 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                 arrived = s_arr[g]
                 value[c, g, a, 0] = 0.0 if arrived else s_end[g]
                 total = 0.0
+                # turning, the user drives the orientation alone and by g's orientation alone: a goal with
+                # the orientation of an earlier one (``same_q``) moves exactly as that one's rollout did,
+                # only its rewards differ (``path``)
+                o = same_q[g]
+                twin = not translating and g_lo <= o < g
+                if twin and watch_steps > 0:
+                    for j in range(G):
+                        loglik[c, g, a, j] = loglik[c, o, a, j]
                 for s in range(steps):
-                    # the user's twist toward g, in the driven part
-                    if translating:
-                        dx, dy, dz = kp[g, 0] - px, kp[g, 1] - py, kp[g, 2] - pz
-                        if math.sqrt(dx * dx + dy * dy + dz * dz) > 1.5 * standoff:
-                            dx, dy, dz = pre[g, 0] - px, pre[g, 1] - py, pre[g, 2] - pz
-                        ux, uy, uz = _clip(dx, dy, dz, sp_t)
+                    if twin:  # its twin's path
+                        px, py, pz = path[o, s, 0], path[o, s, 1], path[o, s, 2]
+                        qw, qx, qy, qz = path[o, s, 3], path[o, s, 4], path[o, s, 5], path[o, s, 6]
+                        d_r, opposed = path[o, s, 7], path[o, s, 8] != 0.0
                     else:
-                        ux, uy, uz = _clip(ex, ey, ez, sp_r)
-                    tw, tx, ty, tz = qw, qx, qy, qz  # q turned by the input for T (rotation mode)
-                    if not translating and (ho or s < watch_steps):
-                        tw, tx, ty, tz = _turn(qw, qx, qy, qz, ux, uy, uz, T)
-                    # the robot's twist: driven part (rx, ry, rz), undriven part (ox, oy, oz)
-                    rx = ry = rz = ox = oy = oz = 0.0
-                    if ho:
-                        if s == 0:  # the start's belief, the same for every goal
-                            ws, total_w = w0, total_w0
+                        # the user's twist toward g, in the driven part
+                        if translating:
+                            dx, dy, dz = kp[g, 0] - px, kp[g, 1] - py, kp[g, 2] - pz
+                            if math.sqrt(dx * dx + dy * dy + dz * dz) > 1.5 * standoff:
+                                dx, dy, dz = pre[g, 0] - px, pre[g, 1] - py, pre[g, 2] - pz
+                            ux, uy, uz = _clip(dx, dy, dz, sp_t)
                         else:
-                            mx = lw[0]
-                            for j in range(1, G):
-                                mx = max(mx, lw[j])
-                            total_w = 0.0
+                            ux, uy, uz = _clip(ex, ey, ez, sp_r)
+                        tw, tx, ty, tz = qw, qx, qy, qz  # q turned by the input for T (rotation mode)
+                        if not translating and (ho or s < watch_steps):
+                            tw, tx, ty, tz = _turn(qw, qx, qy, qz, ux, uy, uz, T)
+                        # the robot's twist: driven part (rx, ry, rz), undriven part (ox, oy, oz)
+                        rx = ry = rz = ox = oy = oz = 0.0
+                        if ho:
+                            if s == 0:  # the start's belief, the same for every goal
+                                ws, total_w = w0, total_w0
+                            else:
+                                mx = lw[0]
+                                for j in range(1, G):
+                                    mx = max(mx, lw[j])
+                                total_w = 0.0
+                                for j in range(G):
+                                    w[j] = math.exp(lw[j] - mx)
+                                    total_w += w[j]
+                                ws = w
+                            if translating:
+                                p1x, p1y, p1z = px + ux * T, py + uy * T, pz + uz * T
+                            else:
+                                p1x, p1y, p1z = px, py, pz
+                            update = tracked and s + 1 < steps
+                            speed = math.sqrt(ux * ux + uy * uy + uz * uz)
+                            lx = ly = lz = hx = hy = hz = 0.0
                             for j in range(G):
-                                w[j] = math.exp(lw[j] - mx)
-                                total_w += w[j]
-                            ws = w
+                                wj = ws[j] / total_w
+                                lx += wj * kp[j, 0]
+                                ly += wj * kp[j, 1]
+                                lz += wj * kp[j, 2]
+                                o = same_q[j]
+                                if o == j:
+                                    rot[j, 0], rot[j, 1], rot[j, 2], rot[j, 3] = _rot_err(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3],
+                                                                                          tw, tx, ty, tz)
+                                vx, vy, vz, d1 = rot[o, 0], rot[o, 1], rot[o, 2], rot[o, 3]
+                                hx += wj * vx
+                                hy += wj * vy
+                                hz += wj * vz
+                                if update and translating:
+                                    lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
+                                                                  tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                                elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
+                                    if s == 0:
+                                        v, slope = v0[j], sl0[j]
+                                    elif o == j:
+                                        v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
+                                                          hp[4], hp[5], hp[6], hp[7])
+                                        rot[j, 4], rot[j, 5] = v, slope
+                                    else:
+                                        v, slope = rot[o, 4], rot[o, 5]
+                                    lw[j] -= samples * rot_scale * _turn_cost(v, slope, d1, speed, T, hp)
+                            lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
+                            hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
+                            if translating:
+                                rx, ry, rz, ox, oy, oz = lx, ly, lz, hx, hy, hz
+                            else:
+                                rx, ry, rz, ox, oy, oz = hx, hy, hz, lx, ly, lz
+                        elif kind[a] == MOVE:
+                            if translating:
+                                rx, ry, rz = _clip(g_t * (kp[t, 0] - px), g_t * (kp[t, 1] - py), g_t * (kp[t, 2] - pz), m_t)
+                            else:
+                                vx, vy, vz, _ = _rot_err(kq[t, 0], kq[t, 1], kq[t, 2], kq[t, 3], qw, qx, qy, qz)
+                                rx, ry, rz = _clip(g_r * vx, g_r * vy, g_r * vz, m_r)
+                        opposed = ((ux * rx < 0.0 and abs(ux) > th and abs(rx) > th)
+                                   or (uy * ry < 0.0 and abs(uy) > th and abs(ry) > th)
+                                   or (uz * rz < 0.0 and abs(uz) > th and abs(rz) > th))
+                        if s < watch_steps:
+                            for j in range(G):
+                                loglik[c, g, a, j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz,
+                                                                           ux, uy, uz, tw, tx, ty, tz, j, kp, kq, T, hp,
+                                                                           rot_scale)
+                        # the blend: the user's twist alone for no-assist
+                        if kind[a] == NONE:
+                            bx, by, bz = ux, uy, uz
+                        else:
+                            bx, by, bz = (1.0 - alpha) * ux + alpha * rx, (1.0 - alpha) * uy + alpha * ry, \
+                                (1.0 - alpha) * uz + alpha * rz
                         if translating:
-                            p1x, p1y, p1z = px + ux * T, py + uy * T, pz + uz * T
+                            px, py, pz = px + bx * dt, py + by * dt, pz + bz * dt
+                            if ho:
+                                qw, qx, qy, qz = _turn(qw, qx, qy, qz, alpha * ox, alpha * oy, alpha * oz, dt)
+                            else:
+                                qw, qx, qy, qz = shared[s + 1, 0], shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
                         else:
-                            p1x, p1y, p1z = px, py, pz
-                        update = tracked and s + 1 < steps
-                        speed = math.sqrt(ux * ux + uy * uy + uz * uz)
-                        lx = ly = lz = hx = hy = hz = 0.0
-                        for j in range(G):
-                            wj = ws[j] / total_w
-                            lx += wj * kp[j, 0]
-                            ly += wj * kp[j, 1]
-                            lz += wj * kp[j, 2]
-                            vx, vy, vz, d1 = _rot_err(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz)
-                            hx += wj * vx
-                            hy += wj * vy
-                            hz += wj * vz
-                            if update and translating:
-                                lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
-                                                              tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
-                            elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
-                                if s == 0:
-                                    v, slope = v0[j], sl0[j]
-                                else:
-                                    v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
-                                                      hp[4], hp[5], hp[6], hp[7])
-                                lw[j] -= samples * rot_scale * _turn_cost(v, slope, d1, speed, T, hp)
-                        lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
-                        hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
+                            qw, qx, qy, qz = _turn(qw, qx, qy, qz, bx, by, bz, dt)
+                            if ho:
+                                px, py, pz = px + alpha * ox * dt, py + alpha * oy * dt, pz + alpha * oz * dt
+                            else:
+                                px, py, pz = shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
                         if translating:
-                            rx, ry, rz, ox, oy, oz = lx, ly, lz, hx, hy, hz
-                        else:
-                            rx, ry, rz, ox, oy, oz = hx, hy, hz, lx, ly, lz
-                    elif kind[a] == MOVE:
-                        if translating:
-                            rx, ry, rz = _clip(g_t * (kp[t, 0] - px), g_t * (kp[t, 1] - py), g_t * (kp[t, 2] - pz), m_t)
-                        else:
-                            vx, vy, vz, _ = _rot_err(kq[t, 0], kq[t, 1], kq[t, 2], kq[t, 3], qw, qx, qy, qz)
-                            rx, ry, rz = _clip(g_r * vx, g_r * vy, g_r * vz, m_r)
-                    opposed = ((ux * rx < 0.0 and abs(ux) > th and abs(rx) > th)
-                               or (uy * ry < 0.0 and abs(uy) > th and abs(ry) > th)
-                               or (uz * rz < 0.0 and abs(uz) > th and abs(rz) > th))
-                    if s < watch_steps:
-                        for j in range(G):
-                            loglik[c, g, a, j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz,
-                                                                       ux, uy, uz, tw, tx, ty, tz, j, kp, kq, T, hp,
-                                                                       rot_scale)
-                    # the blend: the user's twist alone for no-assist
-                    if kind[a] == NONE:
-                        bx, by, bz = ux, uy, uz
-                    else:
-                        bx, by, bz = (1.0 - alpha) * ux + alpha * rx, (1.0 - alpha) * uy + alpha * ry, \
-                            (1.0 - alpha) * uz + alpha * rz
-                    if translating:
-                        px, py, pz = px + bx * dt, py + by * dt, pz + bz * dt
-                        if ho:
-                            qw, qx, qy, qz = _turn(qw, qx, qy, qz, alpha * ox, alpha * oy, alpha * oz, dt)
-                        else:
-                            qw, qx, qy, qz = shared[s + 1, 0], shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
-                    else:
-                        qw, qx, qy, qz = _turn(qw, qx, qy, qz, bx, by, bz, dt)
-                        if ho:
-                            px, py, pz = px + alpha * ox * dt, py + alpha * oy * dt, pz + alpha * oz * dt
-                        else:
-                            px, py, pz = shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
-                    if translating:
-                        d_r = _angle(qw, qx, qy, qz, gw, gx, gy, gz)
-                    else:  # the user's next error, and the angle to g
-                        ex, ey, ez, d_r = _rot_err(gw, gx, gy, gz, qw, qx, qy, qz)
+                            d_r = _angle(qw, qx, qy, qz, gw, gx, gy, gz)
+                        else:  # the user's next error, and the angle to g
+                            ex, ey, ez, d_r = _rot_err(gw, gx, gy, gz, qw, qx, qy, qz)
+                            path[g, s, 0], path[g, s, 1], path[g, s, 2] = px, py, pz
+                            path[g, s, 3], path[g, s, 4], path[g, s, 5], path[g, s, 6] = qw, qx, qy, qz
+                            path[g, s, 7], path[g, s, 8] = d_r, 1.0 if opposed else 0.0
                     dpx, dpy, dpz = px - kp[g, 0], py - kp[g, 1], pz - kp[g, 2]
                     r, reached, end = _reward(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), d_r, rp, tail, approach)
                     if not arrived:
@@ -335,22 +386,38 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
 
 
 def roll_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...]) -> None:
-    """:func:`roll` with the user's goals split over ``threads`` threads (it releases the GIL): this thread
-    takes the first share, a process-wide pool the others. ``inputs`` are :func:`roll`'s inputs up to
-    ``rp``, ``outputs`` its six outputs. Each rollout is computed alone, so the outputs do not depend on
-    the split (the shared part a share needs it integrates itself)."""
-    G = len(inputs[3])  # kp
-    n = max(1, min(threads, G))
-    edges = np.linspace(0, G, n + 1).round().astype(int)
+    """:func:`roll` over ``threads`` threads (it releases the GIL): this thread and a process-wide pool
+    take blocks of rollouts from one queue until none is left. Many starts are cut into blocks of starts
+    (``BLOCKS_PER_THREAD`` a thread, so a thread that finishes early takes another), few into one block of
+    the user's goals a thread. ``inputs`` are :func:`roll`'s inputs up to ``rp``, ``outputs`` its six
+    outputs. Each rollout is computed alone, so the outputs do not depend on the blocks (what a block
+    shares between its rollouts it computes itself)."""
+    C, G = len(inputs[0]), len(inputs[3])  # positions, kp
+    n = max(1, threads)
+    if C >= 2 * n:
+        edges = np.linspace(0, C, min(C, BLOCKS_PER_THREAD * n) + 1).round().astype(int)
+        blocks = [(lo, hi, 0, G) for lo, hi in itertools.pairwise(edges)]
+    else:
+        edges = np.linspace(0, G, min(G, n) + 1).round().astype(int)
+        blocks = [(0, C, lo, hi) for lo, hi in itertools.pairwise(edges)]
+    if len(blocks) == 1 or n == 1:
+        for block in blocks:
+            roll(*inputs, *block, *outputs)
+        return
+    queue = iter(blocks)  # next() on it is atomic under the GIL: each block is taken once
 
-    def share(i: int) -> None:
-        roll(*inputs, edges[i], edges[i + 1], *outputs)
+    def work() -> None:
+        for block in queue:
+            roll(*inputs, *block, *outputs)
 
-    futures = [_pool(n - 1).submit(share, i) for i in range(1, n)]
-    share(0)
+    futures = [_pool(n - 1).submit(work) for _ in range(min(n, len(blocks)) - 1)]
+    work()
     for f in futures:
         f.result()
 
+
+BLOCKS_PER_THREAD = 1
+"""Blocks of starts a thread takes on average in :func:`roll_split` (more: better balance, more calls)."""
 
 _POOL: list[tuple[int, ThreadPoolExecutor]] = []
 """The process's rollout threads and their number (made on first use, replaced by a larger pool if asked)."""
@@ -363,14 +430,6 @@ def _pool(workers: int) -> ThreadPoolExecutor:
     if not _POOL or _POOL[0][0] < workers:
         _POOL[:] = [(workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="sa-rollouts"))]
     return _POOL[0][1]
-
-
-def cores() -> int:
-    """Cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def threads(cfg: Config) -> int:
@@ -388,7 +447,8 @@ def warm_up(cfg: Config) -> None:
     outputs = (np.empty((1, 2, 3, 3)), np.empty((1, 2)), np.empty((1, 2, 3, 3)), np.empty((1, 2, 3, 4)),
                np.empty((1, 2, 3)), np.zeros((1, 2, 3, 2)))
     roll(kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05,
-         np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp, 0, 2, *outputs)
+         np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp, 0, 1, 0, 2,
+         *outputs)
 
 
 def supported(cfg: Config) -> bool:

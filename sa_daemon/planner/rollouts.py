@@ -69,16 +69,21 @@ class Rollouts:
     belief HO uses at each, ``kp``/``kq`` the goals' ``k_c`` (``(G, 3)``, ``(G, 4)``), ``actions`` the
     motion actions (moves index ``kp``), ``speed`` the user's (m/s, rad/s), ``steps`` the number of
     ``dt`` steps (s). ``compiled``: force the compiled (``True``) or the numpy form (``False``); ``None``
-    (default) takes the compiled one where :func:`.kernel.supported`.
+    (default) takes the compiled one where :func:`.kernel.supported`. ``pregrasp``: the goals' pre-grasp
+    points ``(G, 3)`` (m) if the caller has them (``pregrasp_points``; computed here otherwise).
     """
 
     def __init__(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray,
                  kp: FloatArray, kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float],
-                 steps: int, dt: float, watch_steps: int = 0, compiled: bool | None = None) -> None:
+                 steps: int, dt: float, watch_steps: int = 0, compiled: bool | None = None,
+                 pregrasp: FloatArray | None = None) -> None:
         if compiled is None:
             compiled = kernel.supported(cfg)
+        if pregrasp is None:
+            pregrasp = pregrasp_points(kp, kq, cfg.planner.user_standoff_m)
         if compiled:
-            self._compiled(cfg, positions, quats, weights, kp, kq, actions, mode, speed, steps, dt, watch_steps)
+            self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, actions, mode, speed, steps, dt,
+                           watch_steps)
             return
         C, G, A = len(positions), len(kp), len(actions)
         translating = Mode(mode) is Mode.TRANSLATION
@@ -100,7 +105,7 @@ class Rollouts:
                                    (C, G, 4 if translating else 3)).copy()
         gp, gq = kp[None, :, None, :], kq[None, :, None, :]  # the user's goals, (1, G, 1, .)
         standoff = cfg.planner.user_standoff_m
-        pre = pregrasp_points(kp, kq, standoff)[None, :, None, :]
+        pre = pregrasp[None, :, None, :]
         move_m = is_move[None, None, :, None]
         none_m = is_none[None, None, :, None]
         alpha = cfg.blend.alpha
@@ -199,7 +204,7 @@ class Rollouts:
         self.loglik = np.zeros((C, G, A, 0))
 
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
-                  kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float], steps: int,
+                  kq: FloatArray, pregrasp: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float], steps: int,
                   dt: float, watch_steps: int) -> None:
         """The same rollouts by :func:`.kernel.roll` (one compiled loop per rollout)."""
         C, G, A = len(positions), len(kp), len(actions)
@@ -219,7 +224,7 @@ class Rollouts:
         inputs = (np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(quats, dtype=float),
                   np.log(np.maximum(np.asarray(weights, dtype=float), 1e-300)),
                   np.ascontiguousarray(kp, dtype=float), np.ascontiguousarray(kq, dtype=float),
-                  np.ascontiguousarray(pregrasp_points(kp, kq, cfg.planner.user_standoff_m)), kind, targets,
+                  np.ascontiguousarray(pregrasp, dtype=float), kind, targets,
                   Mode(mode) is Mode.TRANSLATION, cfg.planner.ho_belief == "tracked",
                   cfg.planner.terminal == "approach", steps, watch_steps, dt, fp, hp, rp)
         kernel.roll_split(kernel.threads(cfg), inputs, (self.value, self.stay, self.watch_positions,

@@ -43,6 +43,7 @@ import numpy as np
 from ..geometry import FloatArray
 from ..model.actions import Action, ActionKind
 from ..model.model import SharedAutonomyModel
+from ..model.twists import pregrasp_points
 from ..world.goals import target_object
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
@@ -80,6 +81,7 @@ class WatchSearch:
         goals = snap.goals
         self.b0 = snap.probs
         self.kp, self.kq = goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad)
+        self.pregrasp = pregrasp_points(self.kp, self.kq, cfg.planner.user_standoff_m)
         self.moves, self.questions = model.action_set(snap.method, goals, self.b0, snap.pose, snap.asked)
         pc = cfg.planner
         self.dt = pc.rollout_step_s
@@ -119,7 +121,7 @@ class WatchSearch:
                   watch_steps: int = 0) -> Rollouts:
         s = self.snap
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
-                        steps, self.dt, watch_steps)
+                        steps, self.dt, watch_steps, pregrasp=self.pregrasp)
 
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
@@ -137,7 +139,9 @@ class WatchSearch:
         M = self._commits(R, steps)  # (C, G, A)
         if self.moves:
             starts = np.flatnonzero(np.bincount(c))  # the start poses present (np.unique sorts: slower)
-            if len(starts) * GATHER_RATIO > n or n * M.shape[1] * M.shape[2] > MAX_GATHER:
+            if len(starts) == n:  # one node a start: the loop's products, batched (the same numbers)
+                E = np.matmul(B[:, None, :], M[c])[:, 0]
+            elif len(starts) * GATHER_RATIO > n or n * M.shape[1] * M.shape[2] > MAX_GATHER:
                 E = np.empty((n, M.shape[2]))
                 for cu in starts:  # one matrix product per start pose, not a (n, G, A) gather
                     at = c == cu
@@ -152,6 +156,12 @@ class WatchSearch:
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
                 or 2 * int(avail.sum()) > MAX_BATCH):
             return V, act
+        if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
+            w = self._ask_last(R, c)
+            eq = np.einsum("ng,ng->n", B, w)
+            q = avail.argmax(axis=1)
+            better = avail.any(axis=1) & (eq > best)
+            return np.where(better[:, None], w, V), np.where(better, len(self.moves) + q, act)
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
@@ -178,10 +188,10 @@ class WatchSearch:
         L = self.L_yes  # (Q, G)
         node, q = np.nonzero(avail)
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
-        if steps == self.n_q:  # no time left after the answer: whatever it is, the pose's value at the horizon
-            Vq[node, q] = total + R.value[c[node], :, 0, 0]  # (no action moves in 0 steps: any column)
+        if steps == self.n_q:
+            Vq[node, q] = self._ask_last(R, c[node])
             return Vq
+        total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
         Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
         py = np.einsum("kg,kg->k", Bn, L[q])
         yes_B, no_B = Bn * L[q] / py[:, None], Bn * (1.0 - L[q]) / (1.0 - py)[:, None]
@@ -196,8 +206,9 @@ class WatchSearch:
         kid_c = np.tile(c[node], m)
         kid_a = np.tile(asked[node] | first_q, (m, 1))
         kid_y = np.concatenate([o[1] for o in outcomes])
-        _, first, inverse = np.unique(_answer_keys(kid_c, kid_a, kid_y), axis=0, return_index=True,
-                                      return_inverse=True)
+        keys = _answer_keys(kid_c, kid_a, kid_y)
+        _, first, inverse = np.unique(keys, axis=0 if keys.ndim > 1 else None, return_index=True,
+                                      return_inverse=True)  # (axis=0 on 1-D keys: the same, slower)
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
@@ -205,6 +216,12 @@ class WatchSearch:
             total = total + like * v[i * k:(i + 1) * k]
         Vq[node, q] = total
         return Vq
+
+    def _ask_last(self, R: Rollouts, c: np.ndarray) -> FloatArray:
+        """``ask_q`` with no time left after the answer, the same for every question: asked, the arm stands
+        still, and whatever the answer, the pose's value at the horizon (no action moves in 0 steps: any
+        column of ``value``). ``(n, G)`` for start poses ``c``."""
+        return self.cfg.reward.question + self.n_q * R.stay[c] + R.value[c, :, 0, 0]
 
     def other_grasp(self, B: FloatArray, q: np.ndarray) -> FloatArray:
         """The tracker's belief after "that object, another grasp" to question ``q`` (per row of ``B``):

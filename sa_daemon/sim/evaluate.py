@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..config import Config, ConfigError
-from ..planner.kernel import cores
+from ..cores import cores
 from ..world.scene import load_scene
 from . import stats
 from .episode import arm_factory, run_trial
