@@ -414,7 +414,10 @@ def test_sigkill_leaves_a_recording_readable_up_to_about_the_last_second(tmp_pat
     d = DaemonProc(tmp_path / "d", "--method", "ho", "--duration", "600", "--no-speech", "--record", "crash.mcap")
     try:
         d.wait_ready()
-        d.collector.state(lambda s: s["t"] >= 3.0, timeout_s=30)
+        # the simulated task begins at ready (late on a machine's first run, with the planner's compile):
+        # kill 3 s after it, so the task event is in a chunk the recording has written
+        _, task = d.collector.event("task", timeout_s=30)
+        d.collector.state(lambda s: s["t"] >= task["t"] + 3.0, timeout_s=30)
         last = d.collector.latest_state()
         rc = d.stop(signal.SIGKILL)
         assert rc == -signal.SIGKILL
