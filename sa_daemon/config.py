@@ -201,6 +201,11 @@ class PlannerConfig(_Section):
     user_speed_tau_s: float = Field(
         1.0, gt=0, description="time constant of the user's smoothed speed the predicted user twists use (s)"
     )
+    user_speed_idle: Literal["decay", "hold"] = Field(
+        "decay",
+        description="the smoothed speed over ticks without input: decay (averaged in as zero: a pausing user is "
+        "predicted to stay still) or hold (left as it was: the speed the user moves at when it moves)",
+    )
 
 
 class InputConfig(_Section):

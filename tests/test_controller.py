@@ -689,3 +689,26 @@ def test_closed_loop_policy_reaches_cup_top_within_limits():
     assert ActionKind.MOVE in kinds  # the planner's assistance took part
     assert ctl.belief.target_probabilities()["cup:top"] > 0.5
     assert ctl.snapshot(arm.read().pose, None) is None  # gripper closed: no plan wanted
+
+
+@pytest.mark.parametrize("idle", ["decay", "hold"])
+def test_the_predicted_user_speed_over_a_pause_decays_or_holds(idle):
+    """``planner.user_speed_idle``: 2 s of full deflection, then 2 s of a released stick (zero input, still
+    fresh). ``decay`` averages the zeros in (time constant ``user_speed_tau_s`` = 1 s: e^-2 of the speed
+    left); ``hold`` keeps the speed the user moved at. The other mode's speed is untouched either way."""
+    cfg = config_from_dict({"planner": {"user_speed_idle": idle}})
+    ctl = make_ctl(cfg=cfg)
+    t = 0.0
+    for _ in range(80):
+        t += DT
+        feed(ctl, [1.0, 0.0, 0.0], t)
+    moving = ctl.user_speed[0]
+    assert moving > 0.5 * cfg.input.linear_scale_mps and ctl.user_speed[1] == 0.0
+    for _ in range(80):
+        t += DT
+        feed(ctl, [0.0, 0.0, 0.0], t)
+    if idle == "hold":
+        assert ctl.user_speed[0] == moving
+    else:
+        assert ctl.user_speed[0] == pytest.approx(moving * math.exp(-2.0), rel=0.05)
+    assert ctl.user_speed[1] == 0.0

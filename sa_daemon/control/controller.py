@@ -277,7 +277,9 @@ class Controller:
         self._t_speed = t
         k = 1.0 - math.exp(-dt / self._cfg.planner.user_speed_tau_s)
         i = 0 if self._mode is Mode.TRANSLATION else 1
-        self._speed[i] += k * (float(np.linalg.norm(u[3 * i:3 * i + 3])) - self._speed[i])
+        speed = float(np.linalg.norm(u[3 * i:3 * i + 3]))
+        if speed > 0.0 or self._cfg.planner.user_speed_idle == "decay":
+            self._speed[i] += k * (speed - self._speed[i])
         return True
 
     # -- questions ---------------------------------------------------------------------------------------
