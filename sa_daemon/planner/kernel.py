@@ -416,7 +416,7 @@ def roll_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...]) -> 
         f.result()
 
 
-BLOCKS_PER_THREAD = 1
+BLOCKS_PER_THREAD = 4
 """Blocks of starts a thread takes on average in :func:`roll_split` (more: better balance, more calls)."""
 
 _POOL: list[tuple[int, ThreadPoolExecutor]] = []

@@ -204,8 +204,8 @@ class Rollouts:
         self.loglik = np.zeros((C, G, A, 0))
 
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
-                  kq: FloatArray, pregrasp: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float], steps: int,
-                  dt: float, watch_steps: int) -> None:
+                  kq: FloatArray, pregrasp: FloatArray, actions: list[Action], mode: Mode,
+                  speed: tuple[float, float], steps: int, dt: float, watch_steps: int) -> None:
         """The same rollouts by :func:`.kernel.roll` (one compiled loop per rollout)."""
         C, G, A = len(positions), len(kp), len(actions)
         kind = np.array([kernel.MOVE if a.kind is ActionKind.MOVE else kernel.HO if a.kind is ActionKind.HO
