@@ -14,6 +14,7 @@ from sa_daemon.geometry import quat_normalize
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
 from sa_daemon.planner import kernel
 from sa_daemon.planner.rollouts import Rollouts
+from sa_daemon.planner.split import threads
 
 FIELDS = ("value", "stay", "watch_positions", "watch_quats", "watch_return", "loglik")
 
@@ -86,8 +87,8 @@ def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
     rng = np.random.default_rng(11)
     positions, quats, weights, kp, kq, actions = _problem(rng, C=7, twins=True)
     out = []
-    for threads in (1, 2, 3, 16):
-        cfg = config_from_dict({"planner": {"threads": threads}}, "test")
+    for n in (1, 2, 3, 16):
+        cfg = config_from_dict({"planner": {"threads": n}}, "test")
         R = Rollouts(cfg, positions, quats, weights, kp, kq, actions, Mode.ROTATION, (0.03, 0.3), steps=4, dt=0.5,
                      watch_steps=1)
         out.append([getattr(R, f) for f in FIELDS])
@@ -97,8 +98,8 @@ def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
 
 
 def test_threads_zero_means_one_per_usable_core():
-    assert kernel.threads(config_from_dict({}, "test")) == cores() >= 1
-    assert kernel.threads(config_from_dict({"planner": {"threads": 3}}, "test")) == 3
+    assert threads(config_from_dict({}, "test")) == cores() >= 1
+    assert threads(config_from_dict({"planner": {"threads": 3}}, "test")) == 3
 
 
 def test_a_forked_child_makes_its_own_rollout_threads():

@@ -60,6 +60,7 @@ from ..model.twists import (
     user_linear,
 )
 from . import kernel
+from .split import roll_split, threads
 
 
 class Rollouts:
@@ -227,5 +228,5 @@ class Rollouts:
                   np.ascontiguousarray(pregrasp, dtype=float), kind, targets,
                   Mode(mode) is Mode.TRANSLATION, cfg.planner.ho_belief == "tracked",
                   cfg.planner.terminal == "approach", steps, watch_steps, dt, fp, hp, rp)
-        kernel.roll_split(kernel.threads(cfg), inputs, (self.value, self.stay, self.watch_positions,
-                                                        self.watch_quats, self.watch_return, self.loglik))
+        roll_split(threads(cfg), inputs, (self.value, self.stay, self.watch_positions, self.watch_quats,
+                                          self.watch_return, self.loglik))
