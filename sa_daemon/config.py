@@ -68,6 +68,11 @@ class IntentConfig(_Section):
         "weighs the translation part (docs/model.md, The tracker)",
     )
 
+    poses: Literal["nearest", "marginal"] = Field(
+        "marginal",
+        description="a goal with several grasp poses: nearest = V and Q from its lowest-value pose (Javdani's); "
+        "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V) (docs/model.md, The tracker)",
+    )
     @property
     def rotation_scale(self) -> float:
         """``rotation_rationality / rationality``: the rotation part's weight in ``Q_g - V_g`` relative to the

@@ -14,7 +14,7 @@ import pytest
 from sa_daemon.config import Config, IntentConfig
 from sa_daemon.geometry import Pose
 from sa_daemon.model.belief import Belief, cap_probabilities
-from sa_daemon.model.huber import huber_slope, huber_value, q_minus_v
+from sa_daemon.model.huber import huber_slope, huber_value, marginal_nll, q_minus_v
 from sa_daemon.world.goals import Goal, GraspType
 from sa_daemon.world.goalset import GoalSet
 
@@ -613,3 +613,68 @@ def test_rotation_rationality_weighs_rotation_input_alone(rotation_beta):
     nll = [hand_q_minus_v_path(offset(), g, u) for g in positions]
     np.testing.assert_allclose(b2.after_input(GRIPPER, np.r_[u, 0, 0, 0], cfg).probs, hand_update([0.5, 0.5], nll),
                                atol=1e-12)
+
+
+# -- a goal's poses marginalised (intent.poses = "marginal"; docs/model.md, "The tracker") ------------------
+
+MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})
+NEAREST = MARGINAL.model_copy(update={"poses": "nearest"})
+
+
+def hand_marginal(gripper: list[float], poses: list[list[float]], u_lin: list[float], beta: float) -> float:
+    """``-log sum_k w_k exp(-beta (Q_k - V_k))``, ``w_k ~ exp(-beta V_k)``, for a pure-translation input and
+    grasps at the gripper's orientation (their rotation terms are zero)."""
+    w = [math.exp(-beta * v_trans(math.dist(gripper, p))) for p in poses]
+    terms = [wk / sum(w) * math.exp(-beta * hand_q_minus_v_path(gripper, p, u_lin)) for wk, p in zip(w, poses)]
+    return -math.log(sum(terms))
+
+
+@pytest.mark.parametrize("u_lin", [[0.0, 0.1, 0.0], [0.0, -0.1, 0.0], [0.05, 0.02, -0.03]])
+def test_marginal_likelihood_matches_hand(u_lin):
+    poses = [offset(dy=-0.05), offset(dy=0.05), offset(dx=0.2)]
+    gs = GoalSet((top_goal("cup", *poses),))
+    got = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, np.r_[u_lin, 0, 0, 0], gs.positions, gs.quats_wxyz,
+                       MARGINAL)
+    assert float(got[0]) == pytest.approx(hand_marginal(offset(), poses, u_lin, 10.0), abs=1e-12)
+
+
+def test_marginal_of_one_pose_goals_and_of_a_padded_set_equal_each_goal_alone():
+    """One pose: the marginal is ``beta (Q - V)`` of that pose; padding (poses far away) adds nothing."""
+    multi = top_goal("cup", offset(dx=-0.2), offset(dy=0.06), offset(dz=0.3))
+    single = top_goal("bowl", offset(dx=0.08))
+    gs = GoalSet((multi, single))
+    u = np.array([0.05, 0.1, 0.0, 0.0, 0.0, 0.0])
+    both = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, MARGINAL)
+    for i, g in enumerate((multi, single)):
+        alone = GoalSet((g,))
+        got = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, alone.positions, alone.quats_wxyz, MARGINAL)
+        assert both[i] == pytest.approx(float(got[0]), abs=1e-12)
+    assert both[1] == pytest.approx(10.0 * hand_q_minus_v_path(offset(), offset(dx=0.08), [0.05, 0.1, 0.0]),
+                                    abs=1e-12)
+
+
+def test_marginal_tends_to_the_nearest_pose_as_the_rationality_grows():
+    poses = [offset(dy=-0.04), offset(dy=0.09)]
+    gs = GoalSet((top_goal("cup", *poses),))
+    u = np.array([0.0, 0.1, 0.0, 0.0, 0.0, 0.0])  # toward the farther pose
+    for beta in (1e3, 1e4):
+        cfg = MARGINAL.model_copy(update={"rationality": beta})
+        got = float(marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, cfg)[0])
+        assert got == pytest.approx(beta * hand_q_minus_v_path(offset(), poses[0], [0.0, 0.1, 0.0]), rel=1e-6)
+
+
+def test_an_input_toward_a_goals_other_pose_is_evidence_for_it_when_marginalised():
+    """Two grasps of the cup 5 cm either side of the gripper (the nearer behind it) and a bowl where the
+    cup's other grasp is: a user pushing toward that grasp. Read by its nearer pose alone the cup loses to
+    the bowl as if the input pointed away from the cup; marginalised, the cup's other grasp explains the
+    input too and the cup loses at half that rate (still losing: the bowl explains all of it, the cup's
+    grasp behind none)."""
+    g = Pose.from_rpy(offset(dy=-0.005), TOP)
+    gs = GoalSet((top_goal("cup", offset(dy=-0.05), offset(dy=0.05)), top_goal("bowl", offset(dy=0.05))))
+    u = np.array([0.0, 0.1, 0.0, 0.0, 0.0, 0.0])
+    prior = Belief.uniform(gs)
+    near, marginal = prior.after_input(g, u, NEAREST).probs, prior.after_input(g, u, MARGINAL).probs
+    odds_near, odds_marginal = math.log(near[1] / near[0]), math.log(marginal[1] / marginal[0])
+    assert odds_near == pytest.approx(10.0 * (hand_q_minus_v_path(offset(dy=-0.005), offset(dy=-0.05), u[:3])
+                                              - hand_q_minus_v_path(offset(dy=-0.005), offset(dy=0.05), u[:3])))
+    assert 0.0 < odds_marginal < 0.6 * odds_near

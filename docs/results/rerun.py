@@ -31,7 +31,7 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 BEFORE_THE_KEY = {
     "planner": {"model": "commit", "ho_belief": "fixed"},
-    "intent": {"step_cost": "time", "rationality": 1.0},
+    "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest"},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
@@ -40,7 +40,8 @@ BEFORE_THE_KEY = {
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
 move-generator HO the defaults, and a question's time 2.5 s; session 10 HO following the tracked belief
 in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds). A file without
-``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``."""
+``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``; one
+without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone."""
 
 
 def _config(recorded: dict) -> Config:

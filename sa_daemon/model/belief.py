@@ -22,7 +22,7 @@ from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
 from ..world.goals import Goal, target_object
 from ..world.goalset import GoalSet
-from .huber import q_minus_v
+from .huber import marginal_nll, q_minus_v
 
 
 def _check_finite(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -134,14 +134,19 @@ class Belief:
 
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:
         """MaxEnt IOC update from one joystick sample: ``log b(g) -= beta (Q_g(x, u) - V_g(x))``, ``beta`` the
-        rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``).
+        rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``);
+        a goal's grasp poses summed (:func:`~.huber.marginal_nll`) or its lowest-value one alone
+        (``intent.poses``).
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
         """
         u = _check_finite("user_twist", user_twist, (6,))
-        nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
-                                          self.goals.quats_wxyz, cfg, cfg.rotation_scale)
+        if cfg.poses == "marginal":
+            nll = marginal_nll(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
+        else:
+            nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
+                                              self.goals.quats_wxyz, cfg, cfg.rotation_scale)
         free = self._competing()
         if free is None:
             return self._with(self._normalised(self.log_p - nll, cfg.cap))

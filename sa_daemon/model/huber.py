@@ -7,7 +7,8 @@ their published implementation (see ``docs/model.md``):
   uses d in m, rotation the quaternion angle in rad with the term scaled by ``weight`` (0.07);
 * the step cost of applying an action for ``T`` s is ``T`` times the slope of ``V`` at the current distance;
 * ``Q_g(x, u) = cost(x) + V_g(x')`` with ``x'`` the pose after the user's twist ``u`` for ``T`` s;
-* a goal with several grasp poses takes ``V`` and ``Q`` from its lowest-value pose;
+* a goal with several grasp poses takes ``V`` and ``Q`` from its lowest-value pose (or, ours, sums the
+  likelihood over its poses: :func:`marginal_nll`);
 * the HO robot twist is the belief-weighted negative gradient of ``Q`` with respect to the action,
   scaled by the robot cost multipliers and shrunk near the goal.
 
@@ -99,6 +100,29 @@ def q_minus_v_at(
     trans = T * huber_slope(d_t, cfg.translation) * per_t + huber_value(d_t1, cfg.translation) - v_t
     rot = T * huber_slope(d_r, cfg.rotation) * per_r + huber_value(d_r1, cfg.rotation) - v_r
     return trans + rotation_scale * rot
+
+
+def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
+                 goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
+    """``-log P(u | g)`` (nats) of one input sample for goals with several grasp poses ``(G, K, ...)``, the
+    poses marginalised: ``P(u | g) = sum_k w_k exp(-(Q_k - V_k))`` with ``w_k = exp(-V_k) / sum_j exp(-V_j)``,
+    ``Q`` and ``V`` of pose ``k`` weighed by the rationalities (``beta`` on the translation part,
+    ``beta_r`` on the rotation part). This is MaxEnt IOC with the pose a latent sub-goal (``exp(-Q_k)``
+    summed over poses, normalised by ``exp(-V_k)`` summed): a goal's value is the soft minimum over its
+    poses, and an input toward any of its poses is evidence for it. As the rationalities grow it tends to
+    ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). Shape ``(G,)``."""
+    G, K = goal_positions.shape[:2]
+    gp, gq = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
+    nll = cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale)
+    d_t = norms(gp - np.asarray(position))
+    d_r = quat_angle(gq, np.asarray(quat))
+    v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
+    v, nll = v.reshape(G, K), nll.reshape(G, K)
+    v = v - v.min(axis=1, keepdims=True)
+    log_w = -v - np.log(np.sum(np.exp(-v), axis=1, keepdims=True))
+    m = log_w - nll
+    top = m.max(axis=1)
+    return -(top + np.log(np.sum(np.exp(m - top[:, None]), axis=1)))
 
 
 def q_minus_v_driven(
