@@ -28,10 +28,11 @@ from ..extras import require
 from ..geometry import Pose
 from ..model.belief import Belief
 from ..model.model import SharedAutonomyModel
-from ..planner.kernel import supported, threads
+from ..planner.kernel import supported
 from ..planner.problem import Problem
 from ..planner.snapshot import Snapshot
 from ..planner.solver import Solver
+from ..planner.split import threads
 from ..sim.episode import run_trial
 from ..world.scene import Scene
 
