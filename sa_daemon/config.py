@@ -68,10 +68,11 @@ class IntentConfig(_Section):
         "weighs the translation part (docs/model.md, The tracker)",
     )
 
-    poses: Literal["nearest", "marginal"] = Field(
+    poses: Literal["nearest", "marginal", "tracked"] = Field(
         "marginal",
         description="a goal with several grasp poses: nearest = V and Q from its lowest-value pose (Javdani's); "
-        "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V) (docs/model.md, The tracker)",
+        "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
+        "goal's posterior over its poses from the input so far (docs/model.md, The tracker)",
     )
     @property
     def rotation_scale(self) -> float:

@@ -678,3 +678,53 @@ def test_an_input_toward_a_goals_other_pose_is_evidence_for_it_when_marginalised
     assert odds_near == pytest.approx(10.0 * (hand_q_minus_v_path(offset(dy=-0.005), offset(dy=-0.05), u[:3])
                                               - hand_q_minus_v_path(offset(dy=-0.005), offset(dy=0.05), u[:3])))
     assert 0.0 < odds_marginal < 0.6 * odds_near
+
+
+TRACKED = MARGINAL.model_copy(update={"poses": "tracked"})
+
+
+def test_tracked_poses_start_uniform_and_follow_bayes_over_a_goals_poses():
+    """``poses = "tracked"``: the first sample's likelihood is the mean over the goal's poses (uniform
+    weights, padding excluded), and the weights then are each pose's posterior by hand."""
+    poses = [offset(dy=-0.05), offset(dy=0.05), offset(dx=0.2)]
+    gs = GoalSet((top_goal("cup", *poses), top_goal("bowl", offset(dx=0.08))))  # the bowl padded to 3
+    u = [0.0, 0.1, 0.0]
+    per = [10.0 * hand_q_minus_v_path(offset(), p, u) for p in poses]
+    want_nll = -math.log(sum(math.exp(-x) for x in per) / 3)
+    b = Belief.uniform(gs).after_input(GRIPPER, np.r_[u, 0, 0, 0], TRACKED)
+    bowl_nll = 10.0 * hand_q_minus_v_path(offset(), offset(dx=0.08), u)
+    assert math.log(b.probs[1] / b.probs[0]) == pytest.approx(want_nll - bowl_nll, abs=1e-12)
+    post = [math.exp(-x) / sum(math.exp(-y) for y in per) for x in per]
+    np.testing.assert_allclose(np.exp(b.pose_log_w[0]), post, atol=1e-12)
+    np.testing.assert_allclose(np.exp(b.pose_log_w[1]), [1.0, 0.0, 0.0], atol=1e-15)
+
+
+def test_tracked_poses_let_a_goal_keep_the_evidence_of_the_pose_the_user_heads_to():
+    """A cup with grasps 5 cm either side of the path and a bowl ahead: a user driving at the cup's +y
+    grasp. Once the input has told the cup's two grasps apart, the tracked weights sit on the +y grasp
+    and the cup loses no more than that grasp explains, while the exp(-V) weights (``marginal``) keep
+    charging it for the grasp behind, every sample."""
+    gs = GoalSet((top_goal("cup", offset(dx=0.1, dy=-0.05), offset(dx=0.1, dy=0.05)),
+                  top_goal("bowl", offset(dx=0.1, dy=0.12))))
+    u = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.0])  # at the cup's +y grasp from the gripper
+    tracked = marginal = Belief.uniform(gs)
+    for _ in range(60):
+        tracked, marginal = tracked.after_input(GRIPPER, u, TRACKED), marginal.after_input(GRIPPER, u, MARGINAL)
+    assert np.exp(tracked.pose_log_w[0, 1]) > 0.99
+    assert tracked.probs[0] > marginal.probs[0]
+    step = tracked.after_input(GRIPPER, u, TRACKED)
+    one_pose = 10.0 * hand_q_minus_v_path(offset(), offset(dx=0.1, dy=0.05), u[:3])
+    bowl = 10.0 * hand_q_minus_v_path(offset(), offset(dx=0.1, dy=0.12), u[:3])
+    gained = math.log(step.probs[0] / step.probs[1]) - math.log(tracked.probs[0] / tracked.probs[1])
+    assert gained == pytest.approx(bowl - one_pose, abs=0.01)
+
+
+def test_tracked_pose_weights_start_again_when_the_belief_resamples():
+    gs = scene_with_multi_pose_target()
+    b = Belief.uniform(gs)
+    for _ in range(40):
+        b = b.after_input(GRIPPER, np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0]), TRACKED)
+    assert b.pose_log_w is not None and b.needs_resampling()
+    r = b.resampled(GRIPPER, TRACKED)
+    assert r is not b and r.pose_log_w is None
+    np.testing.assert_allclose(np.exp(r.pose_weights()).sum(axis=1), 1.0)

@@ -22,7 +22,7 @@ from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
 from ..world.goals import Goal, target_object
 from ..world.goalset import GoalSet
-from .huber import marginal_nll, q_minus_v
+from .huber import marginal_nll, mixture_nll, pose_nll, q_minus_v
 
 
 def _check_finite(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -72,6 +72,9 @@ class Belief:
     log_p: FloatArray
     confirmed: str | None = None
     ruled_out: frozenset[str] = frozenset()
+    pose_log_w: FloatArray | None = None
+    """``intent.poses = "tracked"``: each goal's posterior over its own grasp poses, ``(G, K)`` log-weights
+    normalised per goal (``-inf`` on padding); ``None``: uniform over its poses."""
 
     def __post_init__(self) -> None:
         lp = np.array(self.log_p, dtype=float)
@@ -111,9 +114,20 @@ class Belief:
         """Probability of each high-level target: what users and metrics see."""
         return self.goals.target_probabilities(self.probs)
 
-    def _with(self, log_p: FloatArray, confirmed: str | None = None, ruled_out: frozenset[str] = frozenset()) -> Belief:
-        """A belief over the same goals with ``log_p`` and the answers so far plus the new ones."""
-        return Belief(self.goals, log_p, confirmed or self.confirmed, self.ruled_out | ruled_out)
+    def _with(self, log_p: FloatArray, confirmed: str | None = None, ruled_out: frozenset[str] = frozenset(),
+              pose_log_w: FloatArray | None = None) -> Belief:
+        """A belief over the same goals with ``log_p``, the answers so far plus the new ones, and the pose
+        weights (``None``: the current ones)."""
+        return Belief(self.goals, log_p, confirmed or self.confirmed, self.ruled_out | ruled_out,
+                      self.pose_log_w if pose_log_w is None else pose_log_w)
+
+    def pose_weights(self) -> FloatArray:
+        """Each goal's log-weights over its grasp poses for ``intent.poses = "tracked"``, ``(G, K)``."""
+        if self.pose_log_w is not None:
+            return self.pose_log_w
+        mask = self.goals.pose_mask
+        with np.errstate(divide="ignore"):
+            return np.where(mask, -np.log(mask.sum(axis=1, keepdims=True)), -np.inf)
 
     def _normalised(self, log_p: FloatArray, cap: float, among: np.ndarray | None = None) -> FloatArray:
         log_p = log_p - log_sum_exp(log_p)
@@ -135,28 +149,37 @@ class Belief:
     def after_input(self, pose: Pose, user_twist: FloatArray, cfg: IntentConfig) -> Belief:
         """MaxEnt IOC update from one joystick sample: ``log b(g) -= beta (Q_g(x, u) - V_g(x))``, ``beta`` the
         rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``);
-        a goal's grasp poses summed (:func:`~.huber.marginal_nll`) or its lowest-value one alone
-        (``intent.poses``).
+        a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
+        goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
+        its lowest-value one alone (``intent.poses``).
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
         """
         u = _check_finite("user_twist", user_twist, (6,))
-        if cfg.poses == "marginal":
-            nll = marginal_nll(pose.position, pose.quat_wxyz, u, self.goals.positions, self.goals.quats_wxyz, cfg)
-        else:
-            nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, self.goals.positions,
-                                              self.goals.quats_wxyz, cfg, cfg.rotation_scale)
+        positions, quats = self.goals.positions, self.goals.quats_wxyz
+        pose_log_w = None
+        if cfg.poses == "nearest":
+            nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, positions, quats, cfg,
+                                              cfg.rotation_scale)
+        elif cfg.poses == "marginal":
+            nll = marginal_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg)
+        else:  # tracked: Bayes over each goal's poses, from uniform, along the whole input
+            per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg)
+            log_w = self.pose_weights()
+            nll = mixture_nll(log_w, per)
+            pose_log_w = log_w - per + nll[:, None]  # normalised per goal: sum_k w_k exp(-per_k) = exp(-nll)
+            pose_log_w.setflags(write=False)
         free = self._competing()
         if free is None:
-            return self._with(self._normalised(self.log_p - nll, cfg.cap))
+            return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w)
         # Only the free goals compete, within their joint probability; answered targets keep theirs.
         lp = np.array(self.log_p)
         inner = lp[free] - nll[free]
         lp[free] = log_sum_exp(lp[free]) + inner - log_sum_exp(inner)
         if self.confirmed is None:
             lp = self._normalised(lp, cfg.cap, free)
-        return self._with(lp)
+        return self._with(lp, pose_log_w=pose_log_w)
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -244,4 +267,4 @@ class Belief:
                 goals.append(template.with_poses(tuple(own)))
                 probs.append(tp[t] / n)
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)
+        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)  # pose weights uniform again, as the copies are

@@ -102,27 +102,45 @@ def q_minus_v_at(
     return trans + rotation_scale * rot
 
 
-def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
-                 goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
-    """``-log P(u | g)`` (nats) of one input sample for goals with several grasp poses ``(G, K, ...)``, the
-    poses marginalised: ``P(u | g) = sum_k w_k exp(-(Q_k - V_k))`` with ``w_k = exp(-V_k) / sum_j exp(-V_j)``,
-    ``Q`` and ``V`` of pose ``k`` weighed by the rationalities (``beta`` on the translation part,
-    ``beta_r`` on the rotation part). This is MaxEnt IOC with the pose a latent sub-goal (``exp(-Q_k)``
-    summed over poses, normalised by ``exp(-V_k)`` summed): a goal's value is the soft minimum over its
-    poses, and an input toward any of its poses is evidence for it. As the rationalities grow it tends to
-    ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). Shape ``(G,)``."""
+def pose_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
+             goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
+    """``-log P(u | pose)`` (nats) of one input sample against every grasp pose ``(G, K, ...)``: ``Q - V`` of
+    the pose with its translation part weighed by ``beta`` (``intent.rationality``) and its rotation part
+    by ``beta_r`` (``intent.rotation_rationality``). Shape ``(G, K)``."""
     G, K = goal_positions.shape[:2]
     gp, gq = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
-    nll = cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale)
-    d_t = norms(gp - np.asarray(position))
-    d_r = quat_angle(gq, np.asarray(quat))
+    return cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale).reshape(G, K)
+
+
+def pose_log_weights(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
+                     cfg: IntentConfig) -> FloatArray:
+    """``log w_k``, ``w_k = exp(-V_k) / sum_j exp(-V_j)`` over each goal's poses ``(G, K, ...)`` at the
+    gripper's pose, ``V`` weighed like :func:`pose_nll` (padding, far away, weighs nothing). ``(G, K)``."""
+    d_t = norms(goal_positions - np.asarray(position))
+    d_r = quat_angle(goal_quats, np.asarray(quat))
     v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
-    v, nll = v.reshape(G, K), nll.reshape(G, K)
     v = v - v.min(axis=1, keepdims=True)
-    log_w = -v - np.log(np.sum(np.exp(-v), axis=1, keepdims=True))
+    return -v - np.log(np.sum(np.exp(-v), axis=1, keepdims=True))
+
+
+def mixture_nll(log_w: FloatArray, nll: FloatArray) -> FloatArray:
+    """``-log sum_k w_k exp(-nll_k)`` per goal from ``(G, K)`` log-weights (``-inf``: no such pose) and
+    per-pose ``nll``. Shape ``(G,)``."""
     m = log_w - nll
     top = m.max(axis=1)
     return -(top + np.log(np.sum(np.exp(m - top[:, None]), axis=1)))
+
+
+def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
+                 goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
+    """``-log P(u | g)`` (nats) of one input sample for goals with several grasp poses ``(G, K, ...)``, the
+    poses marginalised: ``P(u | g) = sum_k w_k exp(-(Q_k - V_k))`` with ``w_k = exp(-V_k) / sum_j exp(-V_j)``
+    (:func:`pose_log_weights`, :func:`pose_nll`). This is MaxEnt IOC with the pose a latent sub-goal
+    (``exp(-Q_k)`` summed over poses, normalised by ``exp(-V_k)`` summed): a goal's value is the soft
+    minimum over its poses, and an input toward any of them is evidence for it. As the rationalities grow
+    it tends to ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). Shape ``(G,)``."""
+    return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg),
+                       pose_nll(position, quat, user_twist, goal_positions, goal_quats, cfg))
 
 
 def q_minus_v_driven(

@@ -54,6 +54,14 @@ class GoalSet:
         return out
 
     @cached_property
+    def pose_mask(self) -> np.ndarray:
+        """``(G, K)``: which entries of the padded pose arrays are grasp poses (``False``: padding)."""
+        k = max(len(g.poses) for g in self.goals)
+        out = np.arange(k)[None, :] < np.array([len(g.poses) for g in self.goals])[:, None]
+        out.setflags(write=False)
+        return out
+
+    @cached_property
     def targets(self) -> tuple[str, ...]:
         """Distinct high-level targets in order of first appearance."""
         return tuple(dict.fromkeys(g.target for g in self.goals))
