@@ -67,13 +67,13 @@ class IntentConfig(_Section):
         description="beta of the rotation part of Q_g - V_g (rotation-mode input), per input sample; rationality "
         "weighs the translation part (docs/model.md, The tracker)",
     )
-
     poses: Literal["nearest", "marginal", "tracked"] = Field(
         "marginal",
         description="a goal with several grasp poses: nearest = V and Q from its lowest-value pose (Javdani's); "
         "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
         "goal's posterior over its poses from the input so far (docs/model.md, The tracker)",
     )
+
     @property
     def rotation_scale(self) -> float:
         """``rotation_rationality / rationality``: the rotation part's weight in ``Q_g - V_g`` relative to the

@@ -22,6 +22,8 @@ TOP = (math.pi, 0.0, 0.0)
 GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
 INTENT = IntentConfig(step_cost="time", rationality=1.0)  # Javdani's published form
 PATH = IntentConfig(step_cost="path", rationality=1.0)
+MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})
+NEAREST = MARGINAL.model_copy(update={"poses": "nearest"})
 T = 0.1  # ACTION_APPLY_TIME (s)
 
 
@@ -134,17 +136,29 @@ def test_q_minus_v_uses_the_lowest_value_pose_of_a_goal():
     assert got == pytest.approx(hand_q_minus_v(offset(), near, u), abs=1e-12)
 
 
-def test_q_minus_v_of_a_padded_goal_set_equals_each_goal_alone():
+def _padded_case(form: str):
+    """``(likelihood, config, tolerance, goal checked by hand, its value by hand)`` for
+    :func:`test_the_likelihood_of_a_padded_goal_set_equals_each_goal_alone`."""
+    if form == "nearest":  # the multi-pose goal takes its lowest-value pose
+        return q_minus_v, INTENT, 1e-15, 0, hand_q_minus_v(offset(), offset(dy=0.06), [0.05, 0.1, 0.0])
+    # marginal: a one-pose goal's marginal is beta (Q - V) of that pose
+    return marginal_nll, MARGINAL, 1e-12, 1, 10.0 * hand_q_minus_v_path(offset(), offset(dx=0.08), [0.05, 0.1, 0.0])
+
+
+@pytest.mark.parametrize("form", ["nearest", "marginal"])
+def test_the_likelihood_of_a_padded_goal_set_equals_each_goal_alone(form):
+    """Padding (poses far away) changes no goal's likelihood, nearest pose or marginalised."""
+    likelihood, cfg, tol, checked, by_hand = _padded_case(form)
     multi = top_goal("cup", offset(dx=-0.2), offset(dy=0.06), offset(dz=0.3))
     single = top_goal("bowl", offset(dx=0.08))
     gs = GoalSet((multi, single))  # padded to 3 poses per goal
     u = np.array([0.05, 0.1, 0.0, 0.0, 0.0, 0.0])
-    both = q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, INTENT)
+    both = likelihood(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, cfg)
     for i, g in enumerate((multi, single)):
         alone = GoalSet((g,))
-        got = q_minus_v(GRIPPER.position, GRIPPER.quat_wxyz, u, alone.positions, alone.quats_wxyz, INTENT)
-        assert both[i] == pytest.approx(float(got[0]), abs=1e-15)
-    assert both[0] == pytest.approx(hand_q_minus_v(offset(), offset(dy=0.06), [0.05, 0.1, 0.0]), abs=1e-12)
+        got = likelihood(GRIPPER.position, GRIPPER.quat_wxyz, u, alone.positions, alone.quats_wxyz, cfg)
+        assert both[i] == pytest.approx(float(got[0]), abs=tol)
+    assert both[checked] == pytest.approx(by_hand, abs=1e-12)
 
 
 def two_goal_belief(probs=(0.5, 0.5), second=None) -> tuple[Belief, list[list[float]]]:
@@ -617,9 +631,6 @@ def test_rotation_rationality_weighs_rotation_input_alone(rotation_beta):
 
 # -- a goal's poses marginalised (intent.poses = "marginal"; docs/model.md, "The tracker") ------------------
 
-MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})
-NEAREST = MARGINAL.model_copy(update={"poses": "nearest"})
-
 
 def hand_marginal(gripper: list[float], poses: list[list[float]], u_lin: list[float], beta: float) -> float:
     """``-log sum_k w_k exp(-beta (Q_k - V_k))``, ``w_k ~ exp(-beta V_k)``, for a pure-translation input and
@@ -636,21 +647,6 @@ def test_marginal_likelihood_matches_hand(u_lin):
     got = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, np.r_[u_lin, 0, 0, 0], gs.positions, gs.quats_wxyz,
                        MARGINAL)
     assert float(got[0]) == pytest.approx(hand_marginal(offset(), poses, u_lin, 10.0), abs=1e-12)
-
-
-def test_marginal_of_one_pose_goals_and_of_a_padded_set_equal_each_goal_alone():
-    """One pose: the marginal is ``beta (Q - V)`` of that pose; padding (poses far away) adds nothing."""
-    multi = top_goal("cup", offset(dx=-0.2), offset(dy=0.06), offset(dz=0.3))
-    single = top_goal("bowl", offset(dx=0.08))
-    gs = GoalSet((multi, single))
-    u = np.array([0.05, 0.1, 0.0, 0.0, 0.0, 0.0])
-    both = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, gs.positions, gs.quats_wxyz, MARGINAL)
-    for i, g in enumerate((multi, single)):
-        alone = GoalSet((g,))
-        got = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, alone.positions, alone.quats_wxyz, MARGINAL)
-        assert both[i] == pytest.approx(float(got[0]), abs=1e-12)
-    assert both[1] == pytest.approx(10.0 * hand_q_minus_v_path(offset(), offset(dx=0.08), [0.05, 0.1, 0.0]),
-                                    abs=1e-12)
 
 
 def test_marginal_tends_to_the_nearest_pose_as_the_rationality_grows():
