@@ -140,9 +140,10 @@ class RewardConfig(_Section):
     )
     question: float = Field(-5.0, le=0)
     question_time_s: float = Field(
-        2.5, ge=0,
-        description="time a question stops the arm (s): the watch model charges R_d there for this long; the "
-        "commit model charges this share of the best move's gain",
+        2.0, ge=0,
+        description="time a question stops the arm (s): the watch model charges R_d there for this long (a "
+        "whole number of planner.rollout_step_s steps, at least one); the commit model charges this share of "
+        "the best move's gain",
     )
     repeated_question: float = Field(-100.0, le=0)
     goal: float = Field(100.0, ge=0, description="reward for reaching the desired pose")
@@ -644,6 +645,14 @@ class Config(_Section):
         if self.asking.third_answer and self.planner.model != "watch":
             raise ValueError("asking.third_answer: the planner plans the third answer with the watch model only "
                              '(planner.model = "watch")')
+        if self.planner.model == "watch":  # its times are counted in rollout steps
+            dt = self.planner.rollout_step_s
+            for key, value in (("planner.horizon_s", self.planner.horizon_s), ("planner.watch_s", self.planner.watch_s),
+                               ("reward.question_time_s", self.reward.question_time_s)):
+                steps = value / dt
+                if round(steps) < 1 or abs(steps - round(steps)) > 1e-9:
+                    raise ValueError(f"{key}: {value:g} s is not a whole number of planner.rollout_step_s = {dt:g} s "
+                                     "steps (at least one): the watch model counts it in rollout steps")
         return self
 
 

@@ -88,6 +88,34 @@ def test_non_finite_refused(bad):
         config_from_dict({"blend": {"alpha": bad}})
 
 
+@pytest.mark.parametrize(("section", "key", "value"), [
+    ("reward", "question_time_s", 2.5), ("reward", "question_time_s", 0.0), ("planner", "horizon_s", 4.5),
+    ("planner", "watch_s", 0.3)])
+def test_watch_model_times_off_its_rollout_grid_are_refused_and_named(section, key, value):
+    """The watch model counts these times in rollout steps (1 s by default): a time between two steps is
+    refused, not rounded (before session 19 a question's 2.5 s silently ran as 2 steps)."""
+    with pytest.raises(ConfigError, match=rf"{section}\.{key}: {value:g} s is not a whole number"):
+        config_from_dict({section: {key: value}})
+    ok = config_from_dict({section: {key: value}, "planner": {"model": "commit"}} if section == "reward" else
+                          {"planner": {key: value, "model": "commit"}})
+    assert getattr(getattr(ok, section), key) == value  # the commit model has no grid
+
+
+def test_the_watch_search_charges_the_configured_question_time():
+    from sa_daemon.model.model import SharedAutonomyModel
+    from sa_daemon.planner.snapshot import Snapshot
+    from sa_daemon.planner.watch import WatchSearch
+    from sa_daemon.world.scene import load_scene
+
+    scene = load_scene("scene1")
+    for q_s, dt in ((2.0, 1.0), (1.5, 0.5), (3.0, 1.0)):
+        cfg = config_from_dict({"reward": {"question_time_s": q_s}, "planner": {"rollout_step_s": dt}})
+        model = SharedAutonomyModel(cfg)
+        goals = model.initial_belief(scene.goals).goals
+        search = WatchSearch(model, Snapshot(goals, [0.25] * 4, scene.start, [0.0] * 6, budget_s=None))
+        assert search.n_q * search.dt == pytest.approx(q_s)
+
+
 def test_bad_method_refused():
     with pytest.raises(ConfigError, match="method"):
         config_from_dict({"method": "telepathy"})

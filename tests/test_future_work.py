@@ -140,7 +140,7 @@ def test_a_daemon_with_the_third_answer_takes_it_through_the_protocol(tmp_path):
 
     d = DaemonProc(tmp_path / "d", "--method", "policy", "--duration", "600", "--no-speech",
                    config="[asking]\nthird_answer = true\n[sim_user]\nanswer_delay_s = 60.0\n"
-                          "[planner]\nmax_questions = 5\n[reward]\nquestion_time_s = 0.5\n")
+                          "[planner]\nmax_questions = 5\n[reward]\nquestion_time_s = 1.0\n")
     try:
         d.wait_ready()
         assert d.request({"cmd": "status"})["answers"] == ["yes", "no", "other"]

@@ -32,7 +32,7 @@ SCENE = load_scene("scene1")
 
 
 def _cfg(**planner):
-    return config_from_dict({"planner": {"model": "watch", **planner}, "reward": {"question_time_s": 2.5}}, "test")
+    return config_from_dict({"planner": {"model": "watch", **planner}, "reward": {"question_time_s": 2.0}}, "test")
 
 
 def _snap(speed=(0.02, 0.0), probs=None, budget_s=None):
@@ -264,6 +264,33 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, th
     ref_values, ref_watched = _reference_values(model, snap)
     assert complete
     assert values.keys() == ref_values.keys() and watched.keys() == ref_watched.keys()
+    for a, v in ref_values.items():
+        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    for a, v in ref_watched.items():
+        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_branches_turning_alike_are_searched_once_with_the_values_of_the_plain_recursion(seed):
+    """Turning, a user heading to a goal and one heading to a goal with its orientation (Scene 2's side
+    grasps share one) drive the same turn and the tracker reads it alike: their children are the same
+    and are searched once. The values stay those of the plain recursion, which searches every branch."""
+    scene = load_scene("scene2")
+    rng = np.random.default_rng(seed)
+    cfg = _cfg(max_questions=1, watch_moves=1)
+    model = SharedAutonomyModel(cfg)
+    goals = model.initial_belief(scene.goals).goals
+    probs = rng.dirichlet(np.full(len(goals), 0.7)) + 1e-3
+    start = Pose(scene.start.position + rng.normal(0.0, 0.05, 3), scene.start.quat_wxyz)
+    snap = Snapshot(goals, probs, start, np.zeros(6), Mode.ROTATION, budget_s=None,
+                    user_speed=(0.02, float(rng.uniform(0.05, 0.3))))
+    search = WatchSearch(model, snap)
+    values, watched, complete = search.run()
+    twins = len(search.branches) - len({tuple(search.kq[g]) for g in search.branches})
+    assert twins > 0  # the case under test: branches whose goals share an orientation
+    assert search.children == len(search.watched) * (len(search.branches) - twins)
+    ref_values, ref_watched = _reference_values(model, snap)
+    assert complete and watched.keys() == ref_watched.keys()
     for a, v in ref_values.items():
         assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
     for a, v in ref_watched.items():

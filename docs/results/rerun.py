@@ -53,6 +53,13 @@ def _config(recorded: dict) -> Config:
         recorded[section] = {**keys, **recorded.get(section, {})}
     # one beta for both parts of the tracker's evidence before session 14 split out the rotation part's
     recorded["intent"].setdefault("rotation_rationality", recorded["intent"]["rationality"])
+    # before session 19 the watch model rounded its times to whole rollout steps itself (Python's round, at
+    # least one step: a question's 2.5 s ran as 2 s); the configuration now refuses a time off that grid
+    if recorded["planner"].get("model") == "watch":
+        dt = recorded["planner"].get("rollout_step_s", Config().planner.rollout_step_s)
+        for section, key in (("planner", "horizon_s"), ("planner", "watch_s"), ("reward", "question_time_s")):
+            if key in recorded.get(section, {}):
+                recorded[section] = {**recorded[section], key: max(1, round(recorded[section][key] / dt)) * dt}
     current = Config().model_dump(mode="json")
 
     def keep(rec: dict, cur: dict) -> dict:

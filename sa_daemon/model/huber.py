@@ -76,48 +76,70 @@ def q_minus_v(
 def q_minus_v_at(
     position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
     goal_quats: FloatArray, cfg: IntentConfig, rotation_scale: float = 1.0,
+    distances: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """``Q_g(x, u) - V_g(x)`` against one pose per goal, ``(G, 3)``/``(G, 4)``, for poses ``(..., 3)``,
     ``(..., 4)`` and twists ``(..., 6)``: shape ``(..., G)``. ``Q`` applies ``u`` for
     ``action_apply_time_s`` and adds the step's cost: that time times the slope of ``V`` (``step_cost =
     "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``). ``Q - V`` is a
     translation part plus a rotation part; ``rotation_scale`` multiplies the latter (the tracker's
-    ``IntentConfig.rotation_scale``)."""
+    ``IntentConfig.rotation_scale``). ``distances``: the translation (m) and rotation (rad) distances to
+    the goals now, ``(..., G)``, if the caller has them (:func:`pose_distances`).
+
+    With the path step cost a part the input does not drive costs nothing and, where applying the input
+    leaves that part of the pose exactly as it was, its ``V`` does not change: that part is exactly zero
+    and is not computed (the joystick drives one part at a time)."""
     T = cfg.action_apply_time_s
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]
-    diff = goal_positions - position
-    d_t = norms(diff)
-    d_r = quat_angle(goal_quats, quat)
-    v_t, v_r = huber_value(d_t, cfg.translation), huber_value(d_r, cfg.rotation)
+    if distances is None:
+        d_t, d_r = norms(goal_positions - position), quat_angle(goal_quats, quat)
+    else:
+        d_t, d_r = distances
     p1, q1 = integrate_pose(position, quat, u, T)
-    d_t1 = norms(goal_positions - p1)
-    d_r1 = quat_angle(goal_quats, q1)
-    if cfg.step_cost == "path":
+    path = cfg.step_cost == "path"
+    if path:
         per_t, per_r = norms(u[..., :3]), norms(u[..., 3:])
     else:
         per_t = per_r = 1.0
-    trans = T * huber_slope(d_t, cfg.translation) * per_t + huber_value(d_t1, cfg.translation) - v_t
-    rot = T * huber_slope(d_r, cfg.rotation) * per_r + huber_value(d_r1, cfg.rotation) - v_r
+    trans = rot = np.zeros(np.shape(d_t))
+    if not (path and not u[..., :3].any() and np.array_equal(p1, position)):
+        trans = T * huber_slope(d_t, cfg.translation) * per_t + huber_value(norms(goal_positions - p1), cfg.translation) \
+            - huber_value(d_t, cfg.translation)
+    if not (path and not u[..., 3:].any() and np.array_equal(q1, quat)):
+        rot = T * huber_slope(d_r, cfg.rotation) * per_r + huber_value(quat_angle(goal_quats, q1), cfg.rotation) \
+            - huber_value(d_r, cfg.rotation)
     return trans + rotation_scale * rot
 
 
+def pose_distances(position: FloatArray, quat: FloatArray, goal_positions: FloatArray,
+                   goal_quats: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Translation (m) and rotation (rad) distances of the gripper to every grasp pose ``(G, K, ...)``:
+    ``(G, K)`` each. What :func:`pose_nll` and :func:`pose_log_weights` share."""
+    return norms(goal_positions - np.asarray(position)), quat_angle(goal_quats, np.asarray(quat))
+
+
 def pose_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
-             goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
+             goal_quats: FloatArray, cfg: IntentConfig,
+             distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``-log P(u | pose)`` (nats) of one input sample against every grasp pose ``(G, K, ...)``: ``Q - V`` of
     the pose with its translation part weighed by ``beta`` (``intent.rationality``) and its rotation part
-    by ``beta_r`` (``intent.rotation_rationality``). Shape ``(G, K)``."""
+    by ``beta_r`` (``intent.rotation_rationality``). Shape ``(G, K)``. ``distances``:
+    :func:`pose_distances`, if the caller has them."""
     G, K = goal_positions.shape[:2]
     gp, gq = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
-    return cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale).reshape(G, K)
+    if distances is not None:
+        distances = (distances[0].reshape(G * K), distances[1].reshape(G * K))
+    return cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale,
+                                          distances).reshape(G, K)
 
 
 def pose_log_weights(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
-                     cfg: IntentConfig) -> FloatArray:
+                     cfg: IntentConfig, distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``log w_k``, ``w_k = exp(-V_k) / sum_j exp(-V_j)`` over each goal's poses ``(G, K, ...)`` at the
-    gripper's pose, ``V`` weighed like :func:`pose_nll` (padding, far away, weighs nothing). ``(G, K)``."""
-    d_t = norms(goal_positions - np.asarray(position))
-    d_r = quat_angle(goal_quats, np.asarray(quat))
+    gripper's pose, ``V`` weighed like :func:`pose_nll` (padding, far away, weighs nothing). ``(G, K)``.
+    ``distances``: :func:`pose_distances`, if the caller has them."""
+    d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
     v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
     v = v - v.min(axis=1, keepdims=True)
     return -v - np.log(np.sum(np.exp(-v), axis=1, keepdims=True))
@@ -139,8 +161,9 @@ def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray,
     (``exp(-Q_k)`` summed over poses, normalised by ``exp(-V_k)`` summed): a goal's value is the soft
     minimum over its poses, and an input toward any of them is evidence for it. As the rationalities grow
     it tends to ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). Shape ``(G,)``."""
-    return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg),
-                       pose_nll(position, quat, user_twist, goal_positions, goal_quats, cfg))
+    d = pose_distances(position, quat, goal_positions, goal_quats)
+    return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg, d),
+                       pose_nll(position, quat, user_twist, goal_positions, goal_quats, cfg, d))
 
 
 def q_minus_v_driven(

@@ -25,7 +25,9 @@ earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for)
 renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
 most likely goals. Answers update the belief by Bayes with ``answer_p_correct``; question chains go as
 deep as the horizon allows (``planner.max_questions`` at most, and less where a level would hold more
-than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once.
+than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once, and
+so are the children of branches that reach the same pose with the same belief (turning, goals that share
+an orientation: the predicted turn and the tracker's reading of it depend on the orientation alone).
 
 The search is exhaustive over this finite tree (so exact), batched with numpy: all question children
 of a level in one call, all branches of every watched motion in one rollout batch. It is anytime in two
@@ -113,6 +115,8 @@ class WatchSearch:
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
         self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
         self.nodes = 0
+        self.children = 0
+        """Distinct children of the watched motions searched (branches turning alike are one child)."""
         self._memo: dict[tuple[int, int], tuple[Rollouts, FloatArray]] = {}
 
     # -- pieces ------------------------------------------------------------------------------------------
@@ -258,10 +262,15 @@ class WatchSearch:
         pos = np.concatenate([R.watch_positions[0, g, w] for w in ws])
         quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
         left = self.n - self.n_w
-        kids = self._rollouts(pos, quat, B, left)
-        A = np.repeat(asked, len(B), axis=0)
-        V, _ = self.decide(kids, np.arange(len(B)), B, A, A.copy(), left)
-        v = V[np.arange(len(B)), np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
+        # Turning, branches whose goals share an orientation are the same child (the user turns by the
+        # goal's orientation alone, and the tracker reads the turn by it): each distinct one is searched once.
+        _, first, kid = np.unique(np.concatenate((pos, quat, B), axis=1), axis=0, return_index=True,
+                                  return_inverse=True)
+        self.children = len(first)
+        kids = self._rollouts(pos[first], quat[first], B[first], left)
+        A = np.repeat(asked, len(first), axis=0)
+        V, _ = self.decide(kids, np.arange(len(first)), B[first], A, A.copy(), left)
+        v = V[kid.ravel(), np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
         p = self.b0[g] / self.b0[g].sum()
         return {self.moves[w]: float(p @ (R.watch_return[0, g, w] + v[i])) for i, w in enumerate(ws)}
 
