@@ -73,6 +73,12 @@ class IntentConfig(_Section):
         "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
         "goal's posterior over its poses from the input so far (docs/model.md, The tracker)",
     )
+    copy_weights: Literal["equal", "poses"] = Field(
+        "equal",
+        description="a target's probability over the copies resampling makes of it (section III-G): equal = "
+        "the same share each; poses = each copy's share of the target's grasp-pose weights exp(-V) at the "
+        "gripper, so the next input's likelihood is the same before and after (docs/model.md)",
+    )
 
     @property
     def rotation_scale(self) -> float:

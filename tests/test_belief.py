@@ -345,6 +345,35 @@ def test_resampling_preserves_target_marginals_and_keeps_every_target():
         assert after[t] == pytest.approx(before[t], abs=1e-15)
 
 
+def _target_nll(belief: Belief, target: str, u: np.ndarray, cfg: IntentConfig) -> float:
+    """``-log P(u | target)`` of one input at the gripper, the target's copies mixed by their probabilities."""
+    nll = marginal_nll(GRIPPER.position, GRIPPER.quat_wxyz, u, belief.goals.positions, belief.goals.quats_wxyz, cfg)
+    m = belief.goals.target_mask(target)
+    return float(-(np.logaddexp.reduce(belief.log_p[m] - nll[m]) - np.logaddexp.reduce(belief.log_p[m])))
+
+
+@pytest.mark.parametrize("u", [[0.1, 0.0, 0.0, 0, 0, 0], [0.0, -0.1, 0.02, 0, 0, 0], [-0.1, 0.0, 0.0, 0, 0, 0]])
+def test_copies_weighted_by_their_poses_read_the_next_input_as_the_target_did(u):
+    """``intent.copy_weights = "poses"``: each copy resampling makes gets its share of the target's pose
+    weights ``exp(-V)`` at the gripper, so the marginal tracker reads the next input at that pose exactly
+    as it read it before the split (the target's likelihood is a mixture over its poses either way). With
+    equal shares (the paper's reading of III-G) copies holding unlikely poses get as much as the others
+    and the likelihood changes: a target split that way loses probability it had not lost."""
+    u = np.array(u, dtype=float)
+    cfg = MARGINAL.model_copy(update={"rotation_rationality": 200.0})
+    b = Belief.from_probs(scene_with_multi_pose_target(), np.array([0.8, 0.1, 0.05, 0.05]))
+    for weights, same in (("poses", True), ("equal", False)):
+        c = cfg.model_copy(update={"copy_weights": weights})
+        r = b.resampled(GRIPPER, c)
+        assert [g.target for g in r.goals.goals].count("a:top") == 3
+        assert r.target_probabilities()["a:top"] == pytest.approx(0.8, abs=1e-12)
+        before, after = _target_nll(b, "a:top", u, c), _target_nll(r, "a:top", u, c)
+        if same:
+            assert after == pytest.approx(before, abs=1e-12)
+        else:
+            assert abs(after - before) > 1e-3
+
+
 def test_allocation_is_clipped_by_the_number_of_grasp_poses():
     two_pose = top_goal("a", offset(dx=0.03), offset(dx=0.06))
     gs = GoalSet((two_pose, top_goal("b", offset(dy=0.1)), top_goal("c", offset(dy=-0.1)), top_goal("d", offset(dz=0.1))))

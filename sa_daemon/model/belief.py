@@ -22,7 +22,7 @@ from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
 from ..world.goals import Goal, target_object
 from ..world.goalset import GoalSet
-from .huber import marginal_nll, mixture_nll, pose_nll, q_minus_v
+from .huber import marginal_nll, mixture_nll, pose_log_weights, pose_nll, q_minus_v
 
 
 def _check_finite(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -261,10 +261,15 @@ class Belief:
             template, n = first[t], alloc[t]
             poses = pools[t]
             d = template.with_poses(tuple(poses)).pose_distances(pose, cfg.rotation_weight_m_per_rad)
-            order = [poses[i] for i in np.argsort(d, kind="stable")]
+            idx = np.argsort(d, kind="stable")
+            share = np.full(len(poses), 1.0 / len(poses))
+            if cfg.copy_weights == "poses":  # the marginal tracker's weights of the target's poses, here
+                positions = np.array([q.position for q in poses])[None]
+                quats = np.array([q.quat_wxyz for q in poses])[None]
+                share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, positions, quats, cfg)[0])
             for i in range(n):
-                own = order[i:] if i == n - 1 else [order[i]]
-                goals.append(template.with_poses(tuple(own)))
-                probs.append(tp[t] / n)
+                own = idx[i:] if i == n - 1 else idx[i:i + 1]
+                goals.append(template.with_poses(tuple(poses[k] for k in own)))
+                probs.append(tp[t] * share[own].sum() if cfg.copy_weights == "poses" else tp[t] / n)
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)  # pose weights uniform again, as the copies are
