@@ -260,16 +260,15 @@ class Belief:
         for t in self.goals.targets:
             template, n = first[t], alloc[t]
             poses = pools[t]
-            d = template.with_poses(tuple(poses)).pose_distances(pose, cfg.rotation_weight_m_per_rad)
-            idx = np.argsort(d, kind="stable")
-            share = np.full(len(poses), 1.0 / len(poses))
-            if cfg.copy_weights == "poses":  # the marginal tracker's weights of the target's poses, here
-                positions = np.array([q.position for q in poses])[None]
-                quats = np.array([q.quat_wxyz for q in poses])[None]
-                share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, positions, quats, cfg)[0])
+            pooled = template.with_poses(tuple(poses))
+            idx = np.argsort(pooled.pose_distances(pose, cfg.rotation_weight_m_per_rad), kind="stable")
+            share = None  # equal shares; else the marginal tracker's weights of the target's poses, here
+            if cfg.copy_weights == "poses":
+                share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
+                                                pooled.quats_wxyz[None], cfg)[0])
             for i in range(n):
                 own = idx[i:] if i == n - 1 else idx[i:i + 1]
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
-                probs.append(tp[t] * share[own].sum() if cfg.copy_weights == "poses" else tp[t] / n)
+                probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)  # pose weights uniform again, as the copies are

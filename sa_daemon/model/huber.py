@@ -92,10 +92,7 @@ def q_minus_v_at(
     T = cfg.action_apply_time_s
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]
-    if distances is None:
-        d_t, d_r = norms(goal_positions - position), quat_angle(goal_quats, quat)
-    else:
-        d_t, d_r = distances
+    d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
     p1, q1 = integrate_pose(position, quat, u, T)
     path = cfg.step_cost == "path"
     if path:
