@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from sa_daemon.sim.evaluate import format_summary
-from sa_daemon.sim.stats import stars
+from sa_daemon.sim.stats import bootstrap_ci, stars
 from sa_daemon.sim.suites import SUITES
 
 
@@ -98,9 +98,15 @@ def _mean(xs: list) -> str:
     return f"{sum(xs) / len(xs):.2f}" if xs else "-"
 
 
+def _mean_ci(xs: list) -> str:
+    """The mean with its 95 % percentile-bootstrap interval (``sim.stats.bootstrap_ci``)."""
+    ci = bootstrap_ci(xs)
+    return "-" if ci is None else f"{_mean(xs)} [{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
 def asking(trials: list[dict]) -> list[str]:
-    """Issue 16's measures of policy's questions per user over the suite's tasks: questions a task (mean,
-    largest in one trial), share asked with the belief within 10 % of uniform, share about one of the two
+    """Issue 16's measures of policy's questions per user over the suite's tasks: questions a task (mean
+    with its 95 % bootstrap interval, largest in one trial), share asked with the belief within 10 % of uniform, share about one of the two
     most likely objects, time of the first question, share of HO or no-assist plans in the first 2 s."""
     pol = [t for t in trials if t["method"] == "policy" and t.get("asked") is not None]
     if not pol:
@@ -123,7 +129,7 @@ def _asking_table(pol: list[dict], by: str) -> list[str]:
         early = [t["early_plans"] for t in mine if t.get("early_plans")]
         passive = [sum(n for a, n in e.items() if a in ("ho", "none")) / max(1, sum(e.values())) for e in early]
         lines.append("| " + " | ".join([
-            f"`{key}`" if by == "task" else key, str(len(mine)), _mean([len(t["asked"]) for t in mine]), str(max(len(t["asked"]) for t in mine)),
+            f"`{key}`" if by == "task" else key, str(len(mine)), _mean_ci([len(t["asked"]) for t in mine]), str(max(len(t["asked"]) for t in mine)),
             _mean([q["over_uniform"] < 1.1 for q in asked]), _mean([q["object_rank"] <= 2 for q in asked]),
             _mean([t["asked"][0]["t"] if t["asked"] else None for t in mine]), _mean(passive)]) + " |")
     return lines
