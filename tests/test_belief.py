@@ -688,7 +688,8 @@ def test_per_pose_likelihood_skips_only_parts_that_are_exactly_zero(twist, step_
     and bowl, for one-part, two-part and zero twists and both step costs (the evaluation's recorded
     trials reproduce only if nothing changes by a rounding). The last orientation's quaternion is not
     exactly the one renormalising it gives, so a turn by nothing moves it by a rounding: its rotation
-    part, a rounding away from zero, is computed."""
+    part, a rounding away from zero, is computed (by renormalising alone, which must give the turn's
+    numbers: the reference here turns in full)."""
     from sa_daemon.geometry import integrate_pose, norms, quat_angle
     from sa_daemon.model.huber import pose_nll
     from sa_daemon.world.scene import load_scene

@@ -93,7 +93,10 @@ def q_minus_v_at(
     position, quat = np.asarray(position)[..., None, :], np.asarray(quat)[..., None, :]
     u = np.asarray(user_twist)[..., None, :]
     d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
-    p1, q1 = integrate_pose(position, quat, u, T)
+    p1 = position + u[..., :3] * T
+    # turning by nothing renormalises only: the numbers of ``turn`` (but an exact zero's sign, read nowhere
+    # here), at a tenth of its cost (the joystick drives one part at a time)
+    q1 = turn(quat, u[..., 3:], T) if u[..., 3:].any() else quat / norms(quat)[..., None]
     path = cfg.step_cost == "path"
     if path:
         per_t, per_r = norms(u[..., :3]), norms(u[..., 3:])
