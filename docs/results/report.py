@@ -106,8 +106,9 @@ def _mean_ci(xs: list) -> str:
 
 def asking(trials: list[dict]) -> list[str]:
     """Issue 16's measures of policy's questions per user over the suite's tasks: questions a task (mean
-    with its 95 % bootstrap interval, largest in one trial), share asked with the belief within 10 % of uniform, share about one of the two
-    most likely objects, time of the first question, share of HO or no-assist plans in the first 2 s."""
+    with its 95 % bootstrap interval, largest in one trial), share asked with the belief within 10 % of
+    uniform, share about one of the two most likely objects, time of the first question, share of HO or
+    no-assist plans in the first 2 s."""
     pol = [t for t in trials if t["method"] == "policy" and t.get("asked") is not None]
     if not pol:
         return []
