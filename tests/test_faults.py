@@ -51,6 +51,7 @@ CFG = Config()
 CONTROL_S = 1.0 / CFG.runtime.control_hz
 PLAN_S = CFG.planner.period_s
 MAX_STATE_GAP_S = 0.2
+WORKER_START_S = 3.0  # s: a replacement planner worker plans within this of its start (twice the slowest seen)
 RECEIVER_GAP_S = 0.5  # s: arrival gaps at the test's subscriber also hold this busy process's scheduling;
 # "the stream never pauses" is decided on the daemon's own clock (MAX_STATE_GAP_S)
 ZERO6 = [0.0] * 6
@@ -275,7 +276,10 @@ def test_planner_worker_killed_or_hung_falls_back_and_is_replaced(tmp_path, sig)
         assert limit - 0.005 <= silent_s <= limit + PLAN_S + 2 * CONTROL_S, restart["reason"]  # (rounded to 0.01)
         assert restart_s <= silent_s + PLAN_S + 2 * CONTROL_S
         assert any(e["type"] == "planner_late" for e in events if t_fault <= e["t"] <= restart["t"])
-    assert new_ok_s - restart_s <= 1.0 + 0.5, f"new worker planning {new_ok_s - restart_s:.2f} s after the restart"
+    # A new worker's first plan waits for its interpreter, imports and numba's cache (0.3-0.5 s on session
+    # 19's machine, 1.1-1.5 s on session 20's slower one, under the full suite): a machine's figure, which
+    # docs/safety.md reports; the bound only says the replacement comes up and plans in seconds.
+    assert new_ok_s - restart_s <= WORKER_START_S, f"new worker planning {new_ok_s - restart_s:.2f} s after the restart"
     assert gap_t <= MAX_STATE_GAP_S and gap_rx <= RECEIVER_GAP_S, (gap_t, gap_rx)
     figure(f"planner_{'sigkill' if sig == signal.SIGKILL else 'hang'}",
            f"no-assist {fallback_s * 1e3:.0f} ms after the fault, {late_s * 1e3:.0f} ms (-0..{uncertain_s * 1e3:.0f} ms) "
