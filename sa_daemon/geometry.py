@@ -139,6 +139,13 @@ def quat_to_matrix(q: ArrayLike) -> FloatArray:
     )
 
 
+def quat_z_axis(q: ArrayLike) -> FloatArray:
+    """The z axis turned by wxyz quaternion(s), ``(..., 3)``: the third column of :func:`quat_to_matrix`
+    (the same numbers) without the other two, e.g. a gripper's approach axis."""
+    w, x, y, z = np.moveaxis(quat_normalize(q), -1, 0)
+    return np.stack((2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)), axis=-1)
+
+
 def matrix_to_quat(m: ArrayLike) -> FloatArray:
     """wxyz quaternion of one 3x3 rotation matrix (Shepperd's method, numerically stable)."""
     m = np.asarray(m, dtype=float)

@@ -18,6 +18,7 @@ from sa_daemon.geometry import (
     quat_mul,
     quat_to_matrix,
     quat_to_rotvec,
+    quat_z_axis,
     rotation_error,
     rotvec_to_quat,
     rpy_to_quat,
@@ -102,6 +103,13 @@ def test_rotvec_to_quat_matches_scipy_and_handles_zero():
 def test_quat_to_matrix_matches_scipy():
     q = random_quats(20)
     np.testing.assert_allclose(quat_to_matrix(q), scipy_rot(q).as_matrix(), atol=1e-12)
+
+
+def test_quat_z_axis_is_the_third_column_of_the_matrix_bit_for_bit():
+    """The pre-grasp points use the z axis alone; the planner's recorded numbers need the same bits."""
+    q = random_quats(50).reshape(5, 10, 4) * 3.0  # unnormalised, batched
+    assert np.array_equal(quat_z_axis(q), quat_to_matrix(q)[..., :, 2])
+    np.testing.assert_allclose(quat_z_axis(q[0, 0]), scipy_rot(q[0, 0]).apply([0.0, 0.0, 1.0]), atol=1e-12)
 
 
 def test_matrix_to_quat_matches_scipy():

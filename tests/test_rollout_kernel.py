@@ -12,6 +12,7 @@ from sa_daemon.config import config_from_dict
 from sa_daemon.cores import cores
 from sa_daemon.geometry import quat_normalize
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
+from sa_daemon.model.twists import pregrasp_points
 from sa_daemon.planner import kernel
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.split import threads
@@ -95,6 +96,49 @@ def test_the_rollouts_do_not_depend_on_how_many_threads_share_them():
     for other in out[1:]:
         for a, b in zip(out[0], other, strict=True):
             assert np.array_equal(a, b)
+
+
+def test_a_start_rolled_out_twice_stores_the_same_numbers():
+    """Threads claim starts without a lock (``kernel.roll``): two may roll out the same start at
+    once. That is harmless only if every output of a rollout is stored, not added to: a start rolled out
+    again over its own outputs (watched steps included) leaves them bit for bit as they were."""
+    rng = np.random.default_rng(3)
+    positions, quats, weights, kp, kq, actions = _problem(rng, C=4, twins=True)
+    for mode in (Mode.TRANSLATION, Mode.ROTATION):
+        R = Rollouts(config_from_dict({"planner": {"threads": 1}}, "test"), positions, quats, weights, kp, kq,
+                     actions, mode, (0.03, 0.3), steps=4, dt=0.5, watch_steps=2)
+        once = [getattr(R, f).copy() for f in FIELDS]
+        kind = np.array([kernel.MOVE if a.kind is ActionKind.MOVE else kernel.HO if a.kind is ActionKind.HO
+                         else kernel.NONE for a in actions])
+        targets = np.array([a.goal if a.kind is ActionKind.MOVE else 0 for a in actions])
+        fp, hp, rp = kernel.parameters(config_from_dict({}, "test"), (0.03, 0.3), 0.5)
+        again = np.zeros(len(positions), dtype=bool)
+        inputs = (positions, quats, np.log(np.maximum(weights, 1e-300)), kp, kq, pregrasp_points(kp, kq, 0.06), kind,
+                  targets, mode is Mode.TRANSLATION, True, False, 4, 2, 0.5, fp, hp, rp)
+        outputs = tuple(getattr(R, f) for f in FIELDS)
+        kernel.roll(*inputs, np.array([2, 0, 2]), again, 0, len(kp), *outputs)
+        kernel.roll(*inputs, np.array([2]), np.zeros(len(positions), dtype=bool), 0, len(kp), *outputs)
+        assert list(again) == [True, False, True, False]  # claimed once each, the repeat skipped
+        for field, before in zip(FIELDS, once, strict=True):
+            assert np.array_equal(getattr(R, field), before), (mode, field)
+
+
+def test_rollouts_started_in_the_background_equal_those_computed_now_and_can_be_cancelled():
+    """``background=True`` starts the rollouts on the pool's threads and returns; after ``join`` the arrays
+    are those of a plain construction. ``cancel`` stops them (the starts in progress finish) and leaves
+    the pool free for the next batch."""
+    rng = np.random.default_rng(8)
+    problem = _problem(rng, C=40, G=6)
+    cfg = config_from_dict({"planner": {"threads": 2}}, "test")
+    now = Rollouts(cfg, *problem, Mode.TRANSLATION, (0.05, 0.3), steps=4, dt=1.0)
+    later = Rollouts(cfg, *problem, Mode.TRANSLATION, (0.05, 0.3), steps=4, dt=1.0, background=True)
+    later.join()
+    later.join()  # idempotent
+    assert np.array_equal(now.value, later.value) and np.array_equal(now.stay, later.stay)
+    dropped = Rollouts(cfg, *problem, Mode.TRANSLATION, (0.05, 0.3), steps=4, dt=1.0, background=True)
+    dropped.cancel()
+    again = Rollouts(cfg, *problem, Mode.TRANSLATION, (0.05, 0.3), steps=4, dt=1.0)
+    assert np.array_equal(now.value, again.value)
 
 
 def test_threads_zero_means_one_per_usable_core():

@@ -25,7 +25,7 @@ from sa_daemon.model.twists import (
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
-from sa_daemon.planner.watch import WatchSearch
+from sa_daemon.planner.watch import WatchSearch, _distinct_rows
 from sa_daemon.world.scene import load_scene
 
 SCENE = load_scene("scene1")
@@ -136,7 +136,7 @@ def test_watching_a_user_heading_to_a_goal_moves_the_branch_belief_toward_that_g
     pose = s.snap.pose
     R = s._rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
     for w in s.watched:
-        B = s.child_beliefs(R, w)
+        B = s.child_beliefs(R, [w])
         assert np.allclose(B.sum(axis=1), 1.0)
         assert np.all(B[np.arange(len(s.branches)), s.branches] > s.b0[s.branches]), s.moves[w].label
 
@@ -153,8 +153,14 @@ def test_a_node_budget_stops_before_the_watched_motions():
     snap = _snap()
     snap = Snapshot(snap.goals, snap.probs, snap.pose, snap.user_twist, budget_s=None, node_budget=1,
                     user_speed=snap.user_speed)
-    r = Solver(model).plan(snap)
+    solver = Solver(model)
+    r = solver.plan(snap)
     assert not r.complete and r.upper_bound >= r.value
+    # the watched motions' rollouts, started beside the root's questions, were dropped: the rollout threads
+    # are free and the next plan is the one a fresh solver makes
+    full = Snapshot(snap.goals, snap.probs, snap.pose, snap.user_twist, budget_s=None, user_speed=snap.user_speed)
+    again, fresh = solver.plan(full), Solver(SharedAutonomyModel(_cfg())).plan(full)
+    assert again.complete and (again.action, again.value) == (fresh.action, fresh.value)
 
 
 # -- the search against a plain recursion ---------------------------------------------------------------
@@ -385,3 +391,17 @@ def test_with_an_idle_user_tracked_and_fixed_ho_are_the_same_rollouts():
                        [HO_ACTION, NO_ASSIST], Mode.TRANSLATION, (0.0, 0.0), steps=5, dt=1.0).value
               for c in (cfg, fixed)]
     assert np.allclose(values[0], values[1], rtol=0, atol=1e-9)
+
+
+def test_distinct_rows_are_numpys_unique_rows_in_order_of_appearance():
+    """The children are deduplicated by their (pose, belief) rows; ``-0.0`` and ``0.0`` are one number."""
+    rng = np.random.default_rng(2)
+    rows = rng.integers(0, 3, (60, 4)).astype(float)
+    rows[5] = -0.0 * rows[5]  # the same as row 5 was, with negative zeros where it had zeros
+    rows[7] = rows[5] * 0.0
+    first, kid = _distinct_rows(rows)
+    values, inverse = np.unique(rows, axis=0, return_inverse=True)
+    assert len(first) == len(values)
+    assert np.array_equal(rows[first][kid], rows)  # every row is its child's row
+    assert list(first) == sorted(first) and kid[first].tolist() == list(range(len(first)))
+    assert np.array_equal(np.unique(inverse.ravel()[first]), np.arange(len(values)))

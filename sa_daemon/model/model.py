@@ -63,9 +63,11 @@ class SharedAutonomyModel:
 
     # -- actions -------------------------------------------------------------------------------------------
 
-    def candidate_goals(self, goals: GoalSet, probs: FloatArray, pose: Pose) -> np.ndarray:
-        """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper."""
-        kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+    def candidate_goals(self, goals: GoalSet, probs: FloatArray, pose: Pose,
+                        desired: tuple[FloatArray, FloatArray] | None = None) -> np.ndarray:
+        """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
+        ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them."""
+        kp, kq = desired if desired is not None else goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
         dist = np.linalg.norm(kp - pose.position, axis=-1)
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
         order = np.lexsort((dist, -np.asarray(probs)))
@@ -80,8 +82,14 @@ class SharedAutonomyModel:
         and never about a target already asked: a repeated question costs ``repeated_question`` and is
         left out of the search), plus HO and no-assist as the method allows.
         """
+        return self.actions_for(method, goals, self.candidate_goals(goals, probs, pose), asked)
+
+    @staticmethod
+    def actions_for(
+        method: str | MethodSpec, goals: GoalSet, cands: np.ndarray, asked: frozenset[str]
+    ) -> tuple[list[Action], list[Action]]:
+        """:meth:`action_set` for the candidate goals ``cands`` (:meth:`candidate_goals`)."""
         spec = method if isinstance(method, MethodSpec) else method_spec(method)
-        cands = self.candidate_goals(goals, probs, pose)
         moves: list[Action] = []
         if spec.moves:
             moves += [Action(ActionKind.MOVE, int(i), goals.goals[i].target) for i in cands]

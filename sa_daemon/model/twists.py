@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
-from ..geometry import FloatArray, integrate_pose, norms, quat_to_matrix, rotation_error
+from ..geometry import FloatArray, integrate_pose, norms, quat_z_axis, rotation_error
 from .actions import Mode
 from .huber import (
     assistance_angular,
@@ -124,7 +124,7 @@ def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cf
 
 def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:
     """Points ``standoff_m`` behind goal poses along their approach axis (the gripper's z), ``(..., 3)``."""
-    return np.asarray(goal_position) - standoff_m * quat_to_matrix(goal_quat)[..., :, 2]
+    return np.asarray(goal_position) - standoff_m * quat_z_axis(goal_quat)
 
 
 def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: FloatArray, speed: float,

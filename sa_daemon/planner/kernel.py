@@ -104,6 +104,14 @@ def _turn_cost(v, slope, d1, speed, T, hp):
     return T * slope * speed + v1 - v
 
 
+@njit(cache=True, inline="always")
+def _move_cost(v, slope, d1, speed, T, hp):
+    """``Q - V`` of a translation at ``speed`` (m/s) for ``T`` (s) from the distance whose Huber value and
+    slope are ``v``, ``slope`` to the distance ``d1`` after it (path step cost)."""
+    v1, _ = _huber(d1, hp[0], hp[1], hp[2], hp[3])
+    return T * slope * speed + v1 - v
+
+
 @njit(cache=True)
 def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, tz, j,
                kp, kq, T, hp, rot_scale):
@@ -116,8 +124,7 @@ def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, 
         ex, ey, ez = dx - ux * T, dy - uy * T, dz - uz * T
         d1 = math.sqrt(ex * ex + ey * ey + ez * ez)
         v, slope = _huber(d, hp[0], hp[1], hp[2], hp[3])
-        v1, _ = _huber(d1, hp[0], hp[1], hp[2], hp[3])
-        return T * slope * speed + v1 - v
+        return _move_cost(v, slope, d1, speed, T, hp)
     v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz), hp[4], hp[5], hp[6], hp[7])
     return rot_scale * _turn_cost(v, slope, _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz), speed,
                                   T, hp)
@@ -159,11 +166,14 @@ def _first_same(kq):
 
 @njit(cache=True, nogil=True)
 def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, tracked, approach,
-         steps, watch_steps, dt, fp, hp, rp, c_lo, c_hi, g_lo, g_hi,
+         steps, watch_steps, dt, fp, hp, rp, order, claimed, g_lo, g_hi,
          value, stay, watch_p, watch_q, watch_ret, loglik):
     """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``)
-    for the starts ``c_lo`` to ``c_hi - 1`` and the user's goals ``g_lo`` to ``g_hi - 1`` (one block of
-    :func:`roll_split`).
+    for the starts in ``order`` not yet ``claimed``, claiming each before rolling it out, and the user's
+    goals ``g_lo`` to ``g_hi - 1`` (:mod:`.split`). Threads share ``claimed`` without a lock: a start a
+    thread sees claimed is being computed by another, and two threads that claim the same start at once
+    compute it twice and store the same numbers (every output of a rollout is stored, none accumulated),
+    so none is missed or spoiled.
 
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
@@ -180,7 +190,9 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     lw = np.empty(G)
     w = np.empty(G)
     # per start, what every action's rollouts share at step 0: toward each goal the user's error, the
-    # reward and its value after the horizon; HO's weights and, turning, its goals' angles and values
+    # reward and its value after the horizon, the tracker's reading of the user's first input (``ll0``);
+    # HO's weights, its goals' Huber values and slopes (the driven part's) and, translating, its error
+    # toward each goal orientation (``rot0``: HO has not turned yet)
     s_err = np.empty((G, 3))
     s_r = np.empty(G)
     s_end = np.empty(G)
@@ -189,12 +201,18 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     v0 = np.empty(G)
     sl0 = np.empty(G)
     rot = np.empty((G, 6))  # HO, per step and goal orientation: error after the user's turn, its angle, V and slope
+    rot0 = np.empty((G, 4))
+    ll0 = np.empty((G if watch_steps > 0 else 0, G))
+    acc = np.empty(G)  # a rollout's log-likelihood so far, stored once (a start computed twice stores the same)
     same_q = _first_same(kq)
     path = np.empty((G, steps, 9))  # turning, per rollout and step: position, quaternion, angle to g, opposed
     has_ho = False
     for a in range(A):
         has_ho = has_ho or kind[a] == HO
-    for c in range(c_lo, c_hi):
+    for c in order:
+        if claimed[c]:
+            continue
+        claimed[c] = True
         qw, qx, qy, qz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
         for g in range(g_lo, g_hi):
             if translating:
@@ -214,9 +232,15 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
             for j in range(G):
                 w0[j] = math.exp(log_w0[c, j] - mx)
                 total_w0 += w0[j]
-                if tracked and not translating and same_q[j] < j:
+                if translating and same_q[j] == j:
+                    rot0[j, 0], rot0[j, 1], rot0[j, 2], rot0[j, 3] = _rot_err(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3],
+                                                                              qw, qx, qy, qz)
+                if tracked and translating:
+                    dpx, dpy, dpz = kp[j, 0] - positions[c, 0], kp[j, 1] - positions[c, 1], kp[j, 2] - positions[c, 2]
+                    v0[j], sl0[j] = _huber(math.sqrt(dpx * dpx + dpy * dpy + dpz * dpz), hp[0], hp[1], hp[2], hp[3])
+                elif tracked and same_q[j] < j:
                     v0[j], sl0[j] = v0[same_q[j]], sl0[same_q[j]]
-                elif tracked and not translating:
+                elif tracked:
                     v0[j], sl0[j] = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz),
                                            hp[4], hp[5], hp[6], hp[7])
         for a in range(A):
@@ -303,14 +327,21 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                 ly += wj * kp[j, 1]
                                 lz += wj * kp[j, 2]
                                 o = same_q[j]
-                                if o == j:
-                                    rot[j, 0], rot[j, 1], rot[j, 2], rot[j, 3] = _rot_err(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3],
-                                                                                          tw, tx, ty, tz)
-                                vx, vy, vz, d1 = rot[o, 0], rot[o, 1], rot[o, 2], rot[o, 3]
+                                if translating and s == 0:
+                                    vx, vy, vz, d1 = rot0[o, 0], rot0[o, 1], rot0[o, 2], rot0[o, 3]
+                                else:
+                                    if o == j:
+                                        rot[j, 0], rot[j, 1], rot[j, 2], rot[j, 3] = _rot_err(
+                                            kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz)
+                                    vx, vy, vz, d1 = rot[o, 0], rot[o, 1], rot[o, 2], rot[o, 3]
                                 hx += wj * vx
                                 hy += wj * vy
                                 hz += wj * vz
-                                if update and translating:
+                                if update and translating and s == 0:  # from the start: its V and slope
+                                    ejx, ejy, ejz = kp[j, 0] - px - ux * T, kp[j, 1] - py - uy * T, kp[j, 2] - pz - uz * T
+                                    lw[j] -= samples * _move_cost(v0[j], sl0[j], math.sqrt(ejx * ejx + ejy * ejy + ejz * ejz),
+                                                                  speed, T, hp)
+                                elif update and translating:
                                     lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
                                                                   tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
                                 elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
@@ -338,11 +369,19 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                         opposed = ((ux * rx < 0.0 and abs(ux) > th and abs(rx) > th)
                                    or (uy * ry < 0.0 and abs(uy) > th and abs(ry) > th)
                                    or (uz * rz < 0.0 and abs(uz) > th and abs(rz) > th))
-                        if s < watch_steps:
+                        if s == 0 and s < watch_steps:  # from the start pose: the same for every action
                             for j in range(G):
-                                loglik[c, g, a, j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz,
-                                                                           ux, uy, uz, tw, tx, ty, tz, j, kp, kq, T, hp,
-                                                                           rot_scale)
+                                if a == 0:
+                                    ll0[g, j] = samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy,
+                                                                     uz, tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                                acc[j] = 0.0 - ll0[g, j]
+                        elif s < watch_steps:
+                            for j in range(G):
+                                acc[j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
+                                                               tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                        if s + 1 == watch_steps:
+                            for j in range(G):
+                                loglik[c, g, a, j] = acc[j]
                         # the blend: the user's twist alone for no-assist
                         if kind[a] == NONE:
                             bx, by, bz = ux, uy, uz
@@ -382,17 +421,17 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
 
 
 def warm_up(cfg: Config) -> None:
-    """Compile :func:`roll` (first run on a machine: a few seconds) or load it from numba's cache, on a
-    one-start problem, so the first plan does not pay for it."""
+    """Compile :func:`roll` (first run on a machine: 5-15 s) or load it from numba's cache, on a one-start
+    problem, so the first plan does not pay for it."""
     if not supported(cfg):
         return
     kp, kq = np.array([[0.3, 0.0, 0.1], [0.3, 0.1, 0.1]]), np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
     fp, hp, rp = parameters(cfg, (0.05, 0.2), 1.0)
     outputs = (np.empty((1, 2, 3, 3)), np.empty((1, 2)), np.empty((1, 2, 3, 3)), np.empty((1, 2, 3, 4)),
                np.empty((1, 2, 3)), np.zeros((1, 2, 3, 2)))
-    roll(kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05,
-         np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp, 0, 1, 0, 2,
-         *outputs)
+    inputs = (kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05,
+              np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp)
+    roll(*inputs, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_), 0, 2, *outputs)
 
 
 def supported(cfg: Config) -> bool:

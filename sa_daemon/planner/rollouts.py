@@ -60,7 +60,7 @@ from ..model.twists import (
     user_linear,
 )
 from . import kernel
-from .split import roll_split, threads
+from .split import Pending, start_split, threads
 
 
 class Rollouts:
@@ -72,19 +72,23 @@ class Rollouts:
     ``dt`` steps (s). ``compiled``: force the compiled (``True``) or the numpy form (``False``); ``None``
     (default) takes the compiled one where :func:`.kernel.supported`. ``pregrasp``: the goals' pre-grasp
     points ``(G, 3)`` (m) if the caller has them (``pregrasp_points``; computed here otherwise).
+    ``background``: the compiled form is only started on the rollout threads, and the caller runs other
+    Python meanwhile; the arrays are ready after :meth:`join` (or not to be read after :meth:`cancel`).
     """
+
+    _pending: Pending | None = None
 
     def __init__(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray,
                  kp: FloatArray, kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float],
                  steps: int, dt: float, watch_steps: int = 0, compiled: bool | None = None,
-                 pregrasp: FloatArray | None = None) -> None:
+                 pregrasp: FloatArray | None = None, background: bool = False) -> None:
         if compiled is None:
             compiled = kernel.supported(cfg)
         if pregrasp is None:
             pregrasp = pregrasp_points(kp, kq, cfg.planner.user_standoff_m)
         if compiled:
             self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, actions, mode, speed, steps, dt,
-                           watch_steps)
+                           watch_steps, background)
             return
         C, G, A = len(positions), len(kp), len(actions)
         translating = Mode(mode) is Mode.TRANSLATION
@@ -197,6 +201,19 @@ class Rollouts:
                 self.watch_return = total.copy()  # the return so far, without the terminal charge
         self.loglik = loglik
 
+    def join(self) -> None:
+        """Wait for rollouts started in the ``background``, this thread taking its share (no-op otherwise)."""
+        if self._pending is not None:
+            self._pending.join()
+            self._pending = None
+
+    def cancel(self) -> None:
+        """Stop rollouts started in the ``background`` (the starts in progress finish); the arrays are
+        incomplete and not to be read."""
+        if self._pending is not None:
+            self._pending.cancel()
+            self._pending = None
+
     def _no_watch(self, C: int, G: int, A: int) -> None:
         """The watch arrays without watched steps: empty, ``(C, G, 0, ...)``."""
         self.watch_positions = np.empty((C, G, 0, 3))
@@ -206,7 +223,7 @@ class Rollouts:
 
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
                   kq: FloatArray, pregrasp: FloatArray, actions: list[Action], mode: Mode,
-                  speed: tuple[float, float], steps: int, dt: float, watch_steps: int) -> None:
+                  speed: tuple[float, float], steps: int, dt: float, watch_steps: int, background: bool) -> None:
         """The same rollouts by :func:`.kernel.roll` (one compiled loop per rollout)."""
         C, G, A = len(positions), len(kp), len(actions)
         kind = np.array([kernel.MOVE if a.kind is ActionKind.MOVE else kernel.HO if a.kind is ActionKind.HO
@@ -228,5 +245,7 @@ class Rollouts:
                   np.ascontiguousarray(pregrasp, dtype=float), kind, targets,
                   Mode(mode) is Mode.TRANSLATION, cfg.planner.ho_belief == "tracked",
                   cfg.planner.terminal == "approach", steps, watch_steps, dt, fp, hp, rp)
-        roll_split(threads(cfg), inputs, (self.value, self.stay, self.watch_positions, self.watch_quats,
-                                          self.watch_return, self.loglik))
+        self._pending = start_split(threads(cfg), inputs, (self.value, self.stay, self.watch_positions,
+                                                           self.watch_quats, self.watch_return, self.loglik), background)
+        if not background:
+            self.join()

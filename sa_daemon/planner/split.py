@@ -1,15 +1,19 @@
 """The compiled rollouts (:func:`.kernel.roll`) split over threads.
 
 :func:`.kernel.roll` releases the GIL and computes each rollout alone, so a plan's rollouts can be cut
-into blocks and shared by threads with outputs that do not depend on the cut. This thread and a
-process-wide pool take the blocks from one queue.
+into pieces and shared by threads with outputs that do not depend on the cut. Many start poses are
+shared one start at a time: each thread walks the starts from its own place round the ring and claims
+every start it finds unclaimed (inside :func:`.kernel.roll`), all in compiled code, so a thread never waits for
+the GIL between starts and the calling thread may do other work meanwhile (:meth:`Pending.join` later).
+Few starts are cut into blocks of the user's goals taken from one queue.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
-from concurrent.futures import ThreadPoolExecutor
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -19,39 +23,94 @@ from ..geometry import FloatArray
 from .kernel import roll
 
 
+class Pending:
+    """Rollouts being computed on the pool's threads (:func:`start_split`); :meth:`join` has this thread
+    take its share and returns when every rollout is done."""
+
+    def __init__(self, threads: int, inputs: tuple, outputs: tuple[FloatArray, ...], background: bool) -> None:
+        self._inputs, self._outputs = inputs, outputs
+        C, G = len(inputs[0]), len(inputs[3])  # positions, kp
+        n = max(1, threads)
+        self._futures: list[Future] = []
+        self._claimed: np.ndarray | None = None
+        self._blocks: list[tuple[int, int, int]] = []
+        if C >= 2 * n:  # one start at a time: the pool's threads forward from evenly spaced starts, this one
+            # backward from the last (where it meets them latest)
+            self._claimed = np.zeros(C, dtype=np.bool_)
+            ring = np.arange(C)
+            work = [self._starts_work(np.roll(ring, -(k * C // (n - 1)))) for k in range(n - 1)]
+            self._own = ring[::-1].copy()
+        else:  # few starts: blocks of the user's goals from one queue
+            edges = np.linspace(0, G, min(G, n) + 1).round().astype(int)
+            self._blocks = [(C, lo, hi) for lo, hi in itertools.pairwise(edges)]
+            self._queue = iter(self._blocks)  # next() on it is atomic under the GIL: each block is taken once
+            work = [self._block_work] * (min(n, len(self._blocks)) - 1)
+        if not work:
+            return
+        started = [threading.Event() for _ in work]
+        pool = _pool(n - 1)
+        for fn, ev in zip(work, started, strict=True):
+            self._futures.append(pool.submit(_signal_then, ev, fn))
+        if background:  # let them reach compiled code before this thread goes back to Python, rolling out
+            # starts meanwhile (a thread wakes in about 0.1 ms, about what a start takes)
+            taken = 0
+            while self._claimed is not None and taken < C and not all(ev.is_set() for ev in started):
+                self._roll(self._own[taken:taken + 1], self._claimed, 0, G)
+                taken += 1
+            for ev in started:
+                ev.wait()
+
+    def _starts_work(self, order: np.ndarray):
+        return lambda: self._roll(order, self._claimed, 0, len(self._inputs[3]))
+
+    def _roll(self, order: np.ndarray, claimed: np.ndarray, g_lo: int, g_hi: int) -> None:
+        roll(*self._inputs, order, claimed, g_lo, g_hi, *self._outputs)
+
+    def _block_work(self) -> None:
+        for block in self._queue:
+            C, lo, hi = block
+            self._roll(np.arange(C), np.zeros(C, dtype=np.bool_), lo, hi)  # every start, for its goals
+
+    def join(self) -> None:
+        """Take this thread's share, then wait for the others (idempotent)."""
+        if self._claimed is not None:
+            self._roll(self._own, self._claimed, 0, len(self._inputs[3]))
+        else:
+            self._block_work()
+        for f in self._futures:
+            f.result()
+        self._futures = []
+
+    def cancel(self) -> None:
+        """Claim every start left and wait for the starts in progress: the outputs are not to be read."""
+        if self._claimed is not None:
+            self._claimed[:] = True
+        else:
+            for _ in self._queue:
+                pass
+        for f in self._futures:
+            f.result()
+        self._futures = []
+
+
+def _signal_then(event: threading.Event, fn) -> None:
+    event.set()
+    fn()
+
+
+def start_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...], background: bool = False) -> Pending:
+    """Start :func:`.kernel.roll` over ``threads`` threads (it releases the GIL): ``threads - 1`` of a
+    process-wide pool now, this thread at :meth:`Pending.join`. ``inputs`` are :func:`.kernel.roll`'s
+    inputs up to ``rp``, ``outputs`` its six outputs. ``background``: this thread will run Python before
+    joining, so the pool's threads are let into compiled code first (else they would wait for the GIL).
+    Each rollout is computed alone, so the outputs do not depend on the cut."""
+    return Pending(threads, inputs, outputs, background)
+
+
 def roll_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...]) -> None:
-    """:func:`.kernel.roll` over ``threads`` threads (it releases the GIL): this thread and a process-wide pool
-    take blocks of rollouts from one queue until none is left. Many starts are cut into blocks of starts
-    (``BLOCKS_PER_THREAD`` a thread, so a thread that finishes early takes another), few into one block of
-    the user's goals a thread. ``inputs`` are :func:`.kernel.roll`'s inputs up to ``rp``, ``outputs`` its six
-    outputs. Each rollout is computed alone, so the outputs do not depend on the blocks (what a block
-    shares between its rollouts it computes itself)."""
-    C, G = len(inputs[0]), len(inputs[3])  # positions, kp
-    n = max(1, threads)
-    if C >= 2 * n:
-        edges = np.linspace(0, C, min(C, BLOCKS_PER_THREAD * n) + 1).round().astype(int)
-        blocks = [(lo, hi, 0, G) for lo, hi in itertools.pairwise(edges)]
-    else:
-        edges = np.linspace(0, G, min(G, n) + 1).round().astype(int)
-        blocks = [(0, C, lo, hi) for lo, hi in itertools.pairwise(edges)]
-    if len(blocks) == 1 or n == 1:
-        for block in blocks:
-            roll(*inputs, *block, *outputs)
-        return
-    queue = iter(blocks)  # next() on it is atomic under the GIL: each block is taken once
+    """:func:`start_split` and :meth:`Pending.join`: the rollouts over ``threads`` threads, now."""
+    start_split(threads, inputs, outputs).join()
 
-    def work() -> None:
-        for block in queue:
-            roll(*inputs, *block, *outputs)
-
-    futures = [_pool(n - 1).submit(work) for _ in range(min(n, len(blocks)) - 1)]
-    work()
-    for f in futures:
-        f.result()
-
-
-BLOCKS_PER_THREAD = 4
-"""Blocks of starts a thread takes on average in :func:`roll_split` (more: better balance, more calls)."""
 
 _POOL: list[tuple[int, ThreadPoolExecutor]] = []
 """The process's rollout threads and their number (made on first use, replaced by a larger pool if asked)."""
