@@ -67,7 +67,9 @@ class SharedAutonomyModel:
                         desired: tuple[FloatArray, FloatArray] | None = None) -> np.ndarray:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
         ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them."""
-        kp, kq = desired if desired is not None else goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+        if desired is None:
+            desired = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+        kp, kq = desired
         dist = np.linalg.norm(kp - pose.position, axis=-1)
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
         order = np.lexsort((dist, -np.asarray(probs)))

@@ -338,9 +338,11 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                 hy += wj * vy
                                 hz += wj * vz
                                 if update and translating and s == 0:  # from the start: its V and slope
-                                    ejx, ejy, ejz = kp[j, 0] - px - ux * T, kp[j, 1] - py - uy * T, kp[j, 2] - pz - uz * T
-                                    lw[j] -= samples * _move_cost(v0[j], sl0[j], math.sqrt(ejx * ejx + ejy * ejy + ejz * ejz),
-                                                                  speed, T, hp)
+                                    ejx = kp[j, 0] - px - ux * T
+                                    ejy = kp[j, 1] - py - uy * T
+                                    ejz = kp[j, 2] - pz - uz * T
+                                    dist1 = math.sqrt(ejx * ejx + ejy * ejy + ejz * ejz)
+                                    lw[j] -= samples * _move_cost(v0[j], sl0[j], dist1, speed, T, hp)
                                 elif update and translating:
                                     lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
                                                                   tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)

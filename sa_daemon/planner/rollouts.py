@@ -60,7 +60,7 @@ from ..model.twists import (
     user_linear,
 )
 from . import kernel
-from .split import Pending, start_split, threads
+from .split import Pending, threads
 
 
 class Rollouts:
@@ -245,7 +245,7 @@ class Rollouts:
                   np.ascontiguousarray(pregrasp, dtype=float), kind, targets,
                   Mode(mode) is Mode.TRANSLATION, cfg.planner.ho_belief == "tracked",
                   cfg.planner.terminal == "approach", steps, watch_steps, dt, fp, hp, rp)
-        self._pending = start_split(threads(cfg), inputs, (self.value, self.stay, self.watch_positions,
-                                                           self.watch_quats, self.watch_return, self.loglik), background)
+        self._pending = Pending(threads(cfg), inputs, (self.value, self.stay, self.watch_positions, self.watch_quats,
+                                                       self.watch_return, self.loglik), background)
         if not background:
             self.join()

@@ -24,16 +24,19 @@ from .kernel import roll
 
 
 class Pending:
-    """Rollouts being computed on the pool's threads (:func:`start_split`); :meth:`join` has this thread
-    take its share and returns when every rollout is done."""
+    """:func:`.kernel.roll` over ``threads`` threads (it releases the GIL): ``threads - 1`` of a process-wide
+    pool start now, this thread takes its share at :meth:`join`, which returns when every rollout is done.
+    ``inputs`` are :func:`.kernel.roll`'s inputs up to ``rp``, ``outputs`` its six outputs. ``background``:
+    this thread will run Python before joining, so the pool's threads are let into compiled code first
+    (else they would wait for the GIL). Each rollout is computed alone, so the outputs do not depend on
+    the cut."""
 
-    def __init__(self, threads: int, inputs: tuple, outputs: tuple[FloatArray, ...], background: bool) -> None:
+    def __init__(self, threads: int, inputs: tuple, outputs: tuple[FloatArray, ...], background: bool = False) -> None:
         self._inputs, self._outputs = inputs, outputs
-        C, G = len(inputs[0]), len(inputs[3])  # positions, kp
+        C, G = self._C, self._G = len(inputs[0]), len(inputs[3])  # positions, kp
         n = max(1, threads)
         self._futures: list[Future] = []
         self._claimed: np.ndarray | None = None
-        self._blocks: list[tuple[int, int, int]] = []
         if C >= 2 * n:  # one start at a time: the pool's threads forward from evenly spaced starts, this one
             # backward from the last (where it meets them latest)
             self._claimed = np.zeros(C, dtype=np.bool_)
@@ -42,9 +45,8 @@ class Pending:
             self._own = ring[::-1].copy()
         else:  # few starts: blocks of the user's goals from one queue
             edges = np.linspace(0, G, min(G, n) + 1).round().astype(int)
-            self._blocks = [(C, lo, hi) for lo, hi in itertools.pairwise(edges)]
-            self._queue = iter(self._blocks)  # next() on it is atomic under the GIL: each block is taken once
-            work = [self._block_work] * (min(n, len(self._blocks)) - 1)
+            self._queue = itertools.pairwise(edges)  # next() on it is atomic under the GIL: each block taken once
+            work = [self._block_work] * (min(n, len(edges) - 1) - 1)
         if not work:
             return
         started = [threading.Event() for _ in work]
@@ -61,20 +63,19 @@ class Pending:
                 ev.wait()
 
     def _starts_work(self, order: np.ndarray):
-        return lambda: self._roll(order, self._claimed, 0, len(self._inputs[3]))
+        return lambda: self._roll(order, self._claimed, 0, self._G)
 
     def _roll(self, order: np.ndarray, claimed: np.ndarray, g_lo: int, g_hi: int) -> None:
         roll(*self._inputs, order, claimed, g_lo, g_hi, *self._outputs)
 
     def _block_work(self) -> None:
-        for block in self._queue:
-            C, lo, hi = block
-            self._roll(np.arange(C), np.zeros(C, dtype=np.bool_), lo, hi)  # every start, for its goals
+        for lo, hi in self._queue:  # every start, for the block's goals
+            self._roll(np.arange(self._C), np.zeros(self._C, dtype=np.bool_), int(lo), int(hi))
 
     def join(self) -> None:
         """Take this thread's share, then wait for the others (idempotent)."""
         if self._claimed is not None:
-            self._roll(self._own, self._claimed, 0, len(self._inputs[3]))
+            self._roll(self._own, self._claimed, 0, self._G)
         else:
             self._block_work()
         for f in self._futures:
@@ -96,20 +97,6 @@ class Pending:
 def _signal_then(event: threading.Event, fn) -> None:
     event.set()
     fn()
-
-
-def start_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...], background: bool = False) -> Pending:
-    """Start :func:`.kernel.roll` over ``threads`` threads (it releases the GIL): ``threads - 1`` of a
-    process-wide pool now, this thread at :meth:`Pending.join`. ``inputs`` are :func:`.kernel.roll`'s
-    inputs up to ``rp``, ``outputs`` its six outputs. ``background``: this thread will run Python before
-    joining, so the pool's threads are let into compiled code first (else they would wait for the GIL).
-    Each rollout is computed alone, so the outputs do not depend on the cut."""
-    return Pending(threads, inputs, outputs, background)
-
-
-def roll_split(threads: int, inputs: tuple, outputs: tuple[FloatArray, ...]) -> None:
-    """:func:`start_split` and :meth:`Pending.join`: the rollouts over ``threads`` threads, now."""
-    start_split(threads, inputs, outputs).join()
 
 
 _POOL: list[tuple[int, ThreadPoolExecutor]] = []
