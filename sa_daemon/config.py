@@ -73,6 +73,18 @@ class IntentConfig(_Section):
         "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
         "goal's posterior over its poses from the input so far (docs/model.md, The tracker)",
     )
+    user_standoff_m: float = Field(
+        0.06, ge=0, le=0.3,
+        description="the user translates to this far behind a grasp along its approach first (m): the watch model's "
+        "predicted user heads there, and a turn there is a turn at the goal (turn_charge)",
+    )
+    turn_charge: float = Field(
+        0.0, ge=0, le=1,
+        description="while the input turns without moving, each goal is charged this share of the time form's "
+        "translation step cost (T x slope of V) at the distance to the nearer of its grasp and its pre-grasp "
+        "point: time spent turning is not spent approaching; 0 = the paper's MaxEnt IOC, the default (measured in "
+        "session 22 and left off: with assistance it reads where the robot took the gripper; docs/model.md, The tracker)",
+    )
     copy_weights: Literal["equal", "poses"] = Field(
         "equal",
         description="a target's probability over the copies resampling makes of it (section III-G): equal = "
@@ -206,10 +218,6 @@ class PlannerConfig(_Section):
         "tracked",
         description="watch model: HO in a rollout follows the belief the tracker reaches from the predicted input "
         "(tracked, as the daemon's HO does) or keeps the plan's belief (fixed)",
-    )
-    user_standoff_m: float = Field(
-        0.06, ge=0, le=0.3,
-        description="watch model: the predicted user translates to this far behind a grasp along its approach first (m)",
     )
     user_speed_tau_s: float = Field(
         1.0, gt=0, description="time constant of the user's smoothed speed the predicted user twists use (s)"
@@ -666,13 +674,17 @@ class ConfigError(ValueError):
     """A configuration problem; the message names the key (dotted path) and the file."""
 
 
+MOVED = {"planner.user_standoff_m": "intent.user_standoff_m"}
+"""Keys that moved, and where to: an old file's key is refused with the new place named."""
+
+
 def _format(err: ValidationError, source: str) -> str:
     lines = []
     for e in err.errors():
         key = ".".join(str(p) for p in e["loc"]) or "(top level)"
         msg = e["msg"]
         if e["type"] == "extra_forbidden":
-            msg = "unknown key"
+            msg = f"unknown key (moved to {MOVED[key]})" if key in MOVED else "unknown key"
         elif e["type"] == "value_error":
             msg = msg.removeprefix("Value error, ")
         lines.append(f"{source}: {key}: {msg}")

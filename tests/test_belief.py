@@ -787,3 +787,49 @@ def test_tracked_pose_weights_start_again_when_the_belief_resamples():
     r = b.resampled(GRIPPER, TRACKED)
     assert r is not b and r.pose_log_w is None
     np.testing.assert_allclose(np.exp(r.pose_weights()).sum(axis=1), 1.0)
+
+
+# -- the turn charge (``intent.turn_charge``) -------------------------------------------------------------
+
+CHARGED = MARGINAL.model_copy(update={"turn_charge": 0.03})
+TILTED = Pose.from_rpy(offset(), (math.pi - 0.5, 0.0, 0.0))  # at the first goal's grasp, 0.5 rad off its orientation
+TURN_BACK = np.array([0.0, 0.0, 0.0, -0.3, 0.0, 0.0])  # rad/s, toward the goals' (shared) orientation
+
+
+def twins(*positions) -> Belief:
+    """Top grasps of one orientation on different objects: a turn alone cannot tell them apart."""
+    return Belief.uniform(GoalSet(tuple(top_goal(f"object{i}", p) for i, p in enumerate(positions))))
+
+
+def test_without_the_charge_a_turn_cannot_tell_twins_apart():
+    b = twins(offset(), offset(dy=0.15)).after_input(TILTED, TURN_BACK, MARGINAL)
+    np.testing.assert_allclose(b.probs, [0.5, 0.5], atol=1e-12)
+
+
+def test_a_turn_at_one_goal_tells_it_from_its_twin_out_of_reach_by_hand():
+    b = twins(offset(), offset(dy=0.15)).after_input(TILTED, TURN_BACK, CHARGED)
+    # each goal pays 0.03 x T x the translation slope at its distance, times beta: 0 m and 0.15 m
+    want = 10.0 * 0.03 * T * (slope_trans(0.15) - slope_trans(0.0))
+    assert math.log(b.probs[0] / b.probs[1]) == pytest.approx(want, rel=1e-9)
+    assert b.probs[0] > 0.5
+
+
+def test_a_turn_at_the_stand_off_is_a_turn_at_the_goal():
+    """0.06 m above a top grasp is its pre-grasp point; 0.06 m beside another is not on its approach."""
+    at_standoff = Pose.from_rpy(offset(dz=0.06), (math.pi - 0.5, 0.0, 0.0))
+    b = twins(offset(), offset(dz=0.06, dy=0.06)).after_input(at_standoff, TURN_BACK, CHARGED)
+    want = 10.0 * 0.03 * T * (slope_trans(0.06) - slope_trans(0.0))
+    assert math.log(b.probs[0] / b.probs[1]) == pytest.approx(want, rel=1e-9)
+
+
+@pytest.mark.parametrize("u", [np.zeros(6), np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]), TURN_BACK])
+def test_standing_still_and_moving_pay_no_turn_charge_and_the_time_form_none(u):
+    goals = (offset(), offset(dy=0.15))
+    turning = bool(u[3:].any())
+    for base in (MARGINAL, INTENT):
+        with_charge = base.model_copy(update={"turn_charge": 0.03})
+        a, b = twins(*goals).after_input(TILTED, u, base), twins(*goals).after_input(TILTED, u, with_charge)
+        if turning and base.step_cost == "path":
+            assert b.probs[0] > a.probs[0]
+        else:  # the time form already charges every step its time
+            np.testing.assert_array_equal(a.probs, b.probs)

@@ -65,6 +65,12 @@ def test_unknown_key_refused_and_named():
         config_from_dict({"reward": {"betta": 8.0}})
 
 
+def test_a_moved_key_is_refused_with_its_new_place_named():
+    with pytest.raises(ConfigError, match=r"planner\.user_standoff_m: unknown key \(moved to intent\.user_standoff_m\)"):
+        config_from_dict({"planner": {"user_standoff_m": 0.05}})
+    assert config_from_dict({"intent": {"user_standoff_m": 0.05}}).intent.user_standoff_m == 0.05
+
+
 def test_unknown_top_level_section_named():
     with pytest.raises(ConfigError, match=r"rewards"):
         config_from_dict({"rewards": {"beta": 8.0}})

@@ -41,11 +41,11 @@ def _problem(rng: np.random.Generator, C: int = 3, G: int = 5, twins: bool = Fal
     return positions, quats, weights, kp, kq, actions
 
 
-@pytest.mark.parametrize("mode, belief, terminal, watch_steps", list(itertools.product(
-    (Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2))))
-def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps):
+@pytest.mark.parametrize("mode, belief, terminal, watch_steps, charge", list(itertools.product(
+    (Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2), (0.0, 0.2))))
+def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps, charge):
     cfg = config_from_dict({"planner": {"ho_belief": belief, "terminal": terminal, "threads": 1},  # one block
-                            "intent": {"rotation_rationality": 200.0}}, "test")
+                            "intent": {"rotation_rationality": 200.0, "turn_charge": charge}}, "test")
     assert kernel.supported(cfg)
     rng = np.random.default_rng(7)
     arrivals = 0

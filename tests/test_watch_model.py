@@ -328,7 +328,7 @@ def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, 
     Returns the pose after ``steps`` and the belief."""
     log_b = np.log(b0)
     p, q = np.array(position, dtype=float), np.array(quat, dtype=float)
-    standoff, alpha, T = cfg.planner.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s
+    standoff, alpha, T = cfg.intent.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s
     for _ in range(steps):
         u = np.zeros(6)
         if mode is Mode.TRANSLATION:

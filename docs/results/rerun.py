@@ -31,7 +31,7 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 BEFORE_THE_KEY = {
     "planner": {"model": "commit", "ho_belief": "fixed"},
-    "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest"},
+    "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
@@ -41,7 +41,8 @@ behaviour it had before the key existed (session 9 made the watch model, the pat
 move-generator HO the defaults, and a question's time 2.5 s; session 10 HO following the tracked belief
 in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds). A file without
 ``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``; one
-without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone."""
+without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone; one without
+``intent.turn_charge`` (session 22) charged a turn nothing."""
 
 
 def _config(recorded: dict) -> Config:
@@ -53,6 +54,9 @@ def _config(recorded: dict) -> Config:
         recorded[section] = {**keys, **recorded.get(section, {})}
     # one beta for both parts of the tracker's evidence before session 14 split out the rotation part's
     recorded["intent"].setdefault("rotation_rationality", recorded["intent"]["rationality"])
+    # session 22 moved the user's stand-off from the planner's section to the user model's
+    if "user_standoff_m" in recorded.get("planner", {}):
+        recorded["intent"].setdefault("user_standoff_m", recorded["planner"]["user_standoff_m"])
     # before session 19 the watch model rounded its times to whole rollout steps itself (Python's round, at
     # least one step: a question's 2.5 s ran as 2 s); the configuration now refuses a time off that grid
     if recorded["planner"].get("model") == "watch":

@@ -26,6 +26,7 @@ from ..geometry import (
     integrate_pose,
     norms,
     quat_angle,
+    quat_z_axis,
     rotation_error,
     turn,
 )
@@ -52,6 +53,26 @@ def pose_values(
     d_t = np.linalg.norm(goal_positions - positions, axis=-1)
     d_r = quat_angle(goal_quats, quats)
     return huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
+
+
+TURNING_RADPS = 1e-9
+"""An input turning slower than this (rad/s) is no turn: it pays no turn charge (rounding near a goal's
+orientation must not decide a charge)."""
+
+
+def turn_charge(position: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
+                cfg: IntentConfig) -> FloatArray:
+    """What a turn that does not move the gripper costs each goal in its translation part (per unit of
+    rationality): ``intent.turn_charge x T x slope_t(d)``, a share of the time form's step cost (time
+    spent turning is not spent approaching), ``d`` (m) the distance from ``position`` ``(..., 3)`` to the
+    nearer of the grasp and its pre-grasp point ``intent.user_standoff_m`` behind it along its approach
+    (a user who turns at the stand-off has arrived). Goals ``(G, 3)``/``(G, 4)``; shape ``(..., G)``.
+    Near the grasp the slope is Huber's constant ``a``, far from it ``c + a``: the charge tells a goal
+    the gripper has reached from one it has not, never two goals equally far."""
+    p = np.asarray(position)[..., None, :]
+    d = np.minimum(norms(goal_positions - p),
+                   norms(goal_positions - cfg.user_standoff_m * quat_z_axis(goal_quats) - p))
+    return cfg.turn_charge * cfg.action_apply_time_s * huber_slope(d, cfg.translation)
 
 
 def q_minus_v(
@@ -109,6 +130,9 @@ def q_minus_v_at(
     if not (path and not u[..., 3:].any() and np.array_equal(q1, quat)):
         rot = T * huber_slope(d_r, cfg.rotation) * per_r + huber_value(quat_angle(goal_quats, q1), cfg.rotation) \
             - huber_value(d_r, cfg.rotation)
+    if path and cfg.turn_charge > 0.0 and u[..., 3:].any():  # a turn without a move pays for the time
+        turning = ~np.any(u[..., :3] != 0.0, axis=-1) & (norms(u[..., 3:]) > TURNING_RADPS)
+        trans = trans + np.where(turning, turn_charge(position[..., 0, :], goal_positions, goal_quats, cfg), 0.0)
     return trans + rotation_scale * rot
 
 
@@ -193,7 +217,10 @@ def q_minus_v_driven(
         d = quat_angle(goal_quats, q)
         d1 = quat_angle(goal_quats, turn(q, w, T))
         h, speed, scale = cfg.rotation, norms(w), rotation_scale
-    return scale * (T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h))
+    out = scale * (T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h))
+    if user_angular is not None and cfg.turn_charge > 0.0:  # a turn pays for the time (none standing still)
+        out = out + np.where(speed > TURNING_RADPS, turn_charge(position, goal_positions, goal_quats, cfg), 0.0)
+    return out
 
 
 def assistance_twists(

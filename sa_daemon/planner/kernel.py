@@ -34,6 +34,7 @@ from numba import njit
 
 from ..config import Config
 from ..geometry import FloatArray
+from ..model.huber import TURNING_RADPS
 from ..model.twists import assisted_speeds
 
 MOVE, HO, NONE = 0, 1, 2
@@ -112,11 +113,23 @@ def _move_cost(v, slope, d1, speed, T, hp):
     return T * slope * speed + v1 - v
 
 
+@njit(cache=True, inline="always")
+def _turn_charge(px, py, pz, j, kp, pre, ct, hp):
+    """``huber.turn_charge`` of goal ``j`` at ``p``: ``ct`` (``intent.turn_charge`` x ``T``) times the
+    translation slope at the distance to the nearer of ``j``'s grasp and its pre-grasp point."""
+    dx, dy, dz = kp[j, 0] - px, kp[j, 1] - py, kp[j, 2] - pz
+    ex, ey, ez = pre[j, 0] - px, pre[j, 1] - py, pre[j, 2] - pz
+    d = min(math.sqrt(dx * dx + dy * dy + dz * dz), math.sqrt(ex * ex + ey * ey + ez * ez))
+    _, slope = _huber(d, hp[0], hp[1], hp[2], hp[3])
+    return ct * slope
+
+
 @njit(cache=True)
 def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, tz, j,
-               kp, kq, T, hp, rot_scale):
+               kp, kq, pre, T, ct, hp, rot_scale):
     """``Q_j - V_j`` of goal ``j`` for an input driving one part (``huber.q_minus_v_driven``, path step
-    cost); ``t`` is ``q`` turned by the input for ``T`` (used in rotation mode only)."""
+    cost; a turn also pays the turn charge ``ct``, :func:`_turn_charge`); ``t`` is ``q`` turned by the input
+    for ``T`` (used in rotation mode only)."""
     speed = math.sqrt(ux * ux + uy * uy + uz * uz)
     if translating:
         dx, dy, dz = kp[j, 0] - px, kp[j, 1] - py, kp[j, 2] - pz
@@ -126,8 +139,11 @@ def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, 
         v, slope = _huber(d, hp[0], hp[1], hp[2], hp[3])
         return _move_cost(v, slope, d1, speed, T, hp)
     v, slope = _huber(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz), hp[4], hp[5], hp[6], hp[7])
-    return rot_scale * _turn_cost(v, slope, _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz), speed,
-                                  T, hp)
+    out = rot_scale * _turn_cost(v, slope, _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz), speed,
+                                 T, hp)
+    if ct > 0.0 and speed > TURNING_RADPS:
+        out += _turn_charge(px, py, pz, j, kp, pre, ct, hp)
+    return out
 
 
 @njit(cache=True)
@@ -177,14 +193,15 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
 
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
-    per rollout step ``k``, terminal paper steps, move gains and top speeds (linear, angular).
+    per rollout step ``k``, terminal paper steps, move gains and top speeds (linear, angular), the turn
+    charge times ``T``.
     ``hp``: the translation and rotation Huber ``c, delta, a, weight``. ``kind``/``targets``: per action
     its kind and, for moves, its goal.
     """
     G, A = kp.shape[0], kind.shape[0]
     sp_t, sp_r, standoff, alpha, T = fp[0], fp[1], fp[2], fp[3], fp[4]
     per_step, th, samples, rot_scale, k, tail = fp[5], fp[6], fp[7], fp[8], fp[9], fp[10]
-    g_t, m_t, g_r, m_r = fp[11], fp[12], fp[13], fp[14]
+    g_t, m_t, g_r, m_r, ct = fp[11], fp[12], fp[13], fp[14], fp[15]
     goal = rp[5]
     shared = np.empty((steps + 1, 4))  # the part the user does not drive, per (c, a) for moves and no-assist
     lw = np.empty(G)
@@ -345,7 +362,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                     lw[j] -= samples * _move_cost(v0[j], sl0[j], dist1, speed, T, hp)
                                 elif update and translating:
                                     lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
-                                                                  tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                                                                  tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp, rot_scale)
                                 elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
                                     if s == 0:
                                         v, slope = v0[j], sl0[j]
@@ -356,6 +373,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                     else:
                                         v, slope = rot[o, 4], rot[o, 5]
                                     lw[j] -= samples * rot_scale * _turn_cost(v, slope, d1, speed, T, hp)
+                                    if ct > 0.0 and speed > TURNING_RADPS:
+                                        lw[j] -= samples * _turn_charge(px, py, pz, j, kp, pre, ct, hp)
                             lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
                             hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
                             if translating:
@@ -375,12 +394,13 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                             for j in range(G):
                                 if a == 0:
                                     ll0[g, j] = samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy,
-                                                                     uz, tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                                                                     uz, tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp,
+                                                                     rot_scale)
                                 acc[j] = 0.0 - ll0[g, j]
                         elif s < watch_steps:
                             for j in range(G):
                                 acc[j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
-                                                               tw, tx, ty, tz, j, kp, kq, T, hp, rot_scale)
+                                                               tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp, rot_scale)
                         if s + 1 == watch_steps:
                             for j in range(G):
                                 loglik[c, g, a, j] = acc[j]
@@ -446,11 +466,11 @@ def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[Floa
     the rollout step (s)."""
     rw, it, mv, alpha = cfg.reward, cfg.intent, cfg.move, cfg.blend.alpha
     v_t, v_r = assisted_speeds(cfg, speed)
-    fp = np.array([speed[0], speed[1], cfg.planner.user_standoff_m, alpha, it.action_apply_time_s,
+    fp = np.array([speed[0], speed[1], cfg.intent.user_standoff_m, alpha, it.action_apply_time_s,
                    rw.opposition_penalty * dt / rw.step_s, rw.opposition_threshold,
                    cfg.runtime.belief_hz * dt * it.rationality, it.rotation_scale, dt / rw.step_s,
                    cfg.planner.terminal_s / rw.step_s, mv.linear_gain, mv.linear_max_mps, mv.angular_gain,
-                   mv.angular_max_radps], dtype=float)
+                   mv.angular_max_radps, it.turn_charge * it.action_apply_time_s], dtype=float)
     hp = np.array([it.translation.c, it.translation.delta, it.translation.a, it.translation.weight,
                    it.rotation.c, it.rotation.delta, it.rotation.a, it.rotation.weight], dtype=float)
     rp = np.array([rw.scale, rw.beta, rw.rotation_threshold_m, rw.goal_translation_m, rw.goal_rotation_rad, rw.goal,

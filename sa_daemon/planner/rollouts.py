@@ -85,7 +85,7 @@ class Rollouts:
         if compiled is None:
             compiled = kernel.supported(cfg)
         if pregrasp is None:
-            pregrasp = pregrasp_points(kp, kq, cfg.planner.user_standoff_m)
+            pregrasp = pregrasp_points(kp, kq, cfg.intent.user_standoff_m)
         if compiled:
             self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, actions, mode, speed, steps, dt,
                            watch_steps, background)
@@ -109,7 +109,7 @@ class Rollouts:
             free = np.broadcast_to((quats if translating else positions)[:, None, :],
                                    (C, G, 4 if translating else 3)).copy()
         gp, gq = kp[None, :, None, :], kq[None, :, None, :]  # the user's goals, (1, G, 1, .)
-        standoff = cfg.planner.user_standoff_m
+        standoff = cfg.intent.user_standoff_m
         pre = pregrasp[None, :, None, :]
         move_m = is_move[None, None, :, None]
         none_m = is_none[None, None, :, None]
@@ -174,9 +174,9 @@ class Rollouts:
                     r_lin[:, :, h] = ho_lin
                 if not (tracked and translating):
                     r_ang[:, :, h] = ho_ang
-                if tracked and s + 1 < steps:
+                if tracked and s + 1 < steps:  # (turning, HO's position is in ``free``: a turn's charge)
                     log_w = log_w - samples * q_minus_v_driven(
-                        P[:, :, h], Q[:, :, h], u_lin[:, :, h] if translating else None,
+                        P[:, :, h] if translating else free, Q[:, :, h], u_lin[:, :, h] if translating else None,
                         None if translating else u_ang[:, :, h], kp, kq, cfg.intent, rot_scale)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
@@ -184,7 +184,8 @@ class Rollouts:
             step_penalty = np.where(opposed & ~arrived, per_step, 0.0)
             if s < watch_steps:  # only the driven part enters the likelihood: HO's is in P or Q
                 loglik -= samples * q_minus_v_driven(
-                    np.broadcast_to(P, (C, G, A, 3)), np.broadcast_to(Q, (C, G, A, 4)),
+                    np.broadcast_to(P, (C, G, A, 3)) if translating else watched(P, free_part=True),
+                    np.broadcast_to(Q, (C, G, A, 4)),
                     np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
                     None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent, rot_scale)
             P = P + t_lin * dt
