@@ -21,7 +21,7 @@ import aiohttp
 import numpy as np
 import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-from helpers import CLI, DaemonProc, free_port
+from helpers import CLI, DaemonProc, free_port, free_ports
 from mcap.reader import make_reader
 
 from sa_daemon.runtime.messages import scene as scene_reply
@@ -276,13 +276,14 @@ def test_the_recording_carries_the_live_topics_with_the_same_schemas(foxglove_da
 
 
 def test_a_port_in_use_is_a_clear_error_and_nothing_starts(tmp_path):
-    busy = DaemonProc(tmp_path / "a", "--foxglove", "--foxglove-port", str(port := free_port()), "--no-speech",
+    port, pub, cmd = free_ports(3)  # distinct: two free_port() calls can return the same released port
+    busy = DaemonProc(tmp_path / "a", "--foxglove", "--foxglove-port", str(port), "--no-speech",
                       "--duration", "60")
     try:
         busy.wait_ready()
         r = subprocess.run([*CLI, "run", "--arm", "kinematic", "--input", "sim", "--foxglove", "--foxglove-port",
-                            str(port), "--pub", f"tcp://127.0.0.1:{free_port()}", "--cmd",
-                            f"tcp://127.0.0.1:{free_port()}", "--no-speech"],
+                            str(port), "--pub", f"tcp://127.0.0.1:{pub}", "--cmd",
+                            f"tcp://127.0.0.1:{cmd}", "--no-speech"],
                            capture_output=True, text=True, timeout=120, cwd=tmp_path, check=False)
         assert r.returncode != 0 and f"foxglove.port {port}" in r.stderr, r.stderr[-2000:]
         assert "] ready " not in r.stderr and "] task " not in r.stderr  # (the event lines without --quiet)
