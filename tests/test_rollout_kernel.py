@@ -12,7 +12,7 @@ from sa_daemon.config import config_from_dict
 from sa_daemon.cores import cores
 from sa_daemon.geometry import quat_normalize
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
-from sa_daemon.model.twists import pregrasp_points
+from sa_daemon.model.huber import pregrasp_points
 from sa_daemon.planner import kernel
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.split import threads

@@ -12,13 +12,12 @@ import pytest
 from sa_daemon.config import config_from_dict
 from sa_daemon.geometry import Pose, quat_angle, turn
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode
-from sa_daemon.model.huber import q_minus_v_at
+from sa_daemon.model.huber import pregrasp_points, q_minus_v_at
 from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.model.reward import approach_return
 from sa_daemon.model.twists import (
     ho_angular,
     ho_linear,
-    pregrasp_points,
     user_angular,
     user_linear,
 )

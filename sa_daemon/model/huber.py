@@ -55,6 +55,11 @@ def pose_values(
     return huber_value(d_t, cfg.translation) + huber_value(d_r, cfg.rotation)
 
 
+def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:
+    """Points ``standoff_m`` behind goal poses along their approach axis (the gripper's z), ``(..., 3)``."""
+    return np.asarray(goal_position) - standoff_m * quat_z_axis(goal_quat)
+
+
 TURNING_RADPS = 1e-9
 """An input turning slower than this (rad/s) is no turn: it pays no turn charge (rounding near a goal's
 orientation must not decide a charge)."""
@@ -70,8 +75,7 @@ def turn_charge(position: FloatArray, goal_positions: FloatArray, goal_quats: Fl
     Near the grasp the slope is Huber's constant ``a``, far from it ``c + a``: the charge tells a goal
     the gripper has reached from one it has not, never two goals equally far."""
     p = np.asarray(position)[..., None, :]
-    d = np.minimum(norms(goal_positions - p),
-                   norms(goal_positions - cfg.user_standoff_m * quat_z_axis(goal_quats) - p))
+    d = np.minimum(norms(goal_positions - p), norms(pregrasp_points(goal_positions, goal_quats, cfg.user_standoff_m) - p))
     return cfg.turn_charge * cfg.action_apply_time_s * huber_slope(d, cfg.translation)
 
 

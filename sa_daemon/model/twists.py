@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
-from ..geometry import FloatArray, integrate_pose, norms, quat_z_axis, rotation_error
+from ..geometry import FloatArray, integrate_pose, norms, rotation_error
 from .actions import Mode
 from .huber import (
     assistance_angular,
@@ -121,10 +121,6 @@ def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cf
     error = np.einsum("...g,...gj->...j", w[..., 0], rotation_error(goal_quats, np.asarray(quat)[..., None, :]))
     return clip_norm(cfg.move.angular_gain * error, cfg.move.angular_max_radps)
 
-
-def pregrasp_points(goal_position: FloatArray, goal_quat: FloatArray, standoff_m: float) -> FloatArray:
-    """Points ``standoff_m`` behind goal poses along their approach axis (the gripper's z), ``(..., 3)``."""
-    return np.asarray(goal_position) - standoff_m * quat_z_axis(goal_quat)
 
 
 def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: FloatArray, speed: float,

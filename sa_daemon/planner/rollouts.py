@@ -47,7 +47,7 @@ import numpy as np
 from ..config import Config
 from ..geometry import FloatArray, norms, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
-from ..model.huber import q_minus_v_driven
+from ..model.huber import pregrasp_points, q_minus_v_driven
 from ..model.reward import approach_return, distance_reward, opposes
 from ..model.twists import (
     assisted_speeds,
@@ -55,7 +55,6 @@ from ..model.twists import (
     ho_linear,
     move_angular,
     move_linear,
-    pregrasp_points,
     user_angular,
     user_linear,
 )

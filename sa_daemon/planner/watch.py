@@ -45,8 +45,8 @@ import numpy as np
 
 from ..geometry import FloatArray
 from ..model.actions import Action, ActionKind
+from ..model.huber import pregrasp_points
 from ..model.model import SharedAutonomyModel
-from ..model.twists import pregrasp_points
 from ..world.goals import target_object
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
