@@ -362,8 +362,10 @@ def test_loopback_server_works_without_keys(cmd, tmp_path):
 
 
 def test_curve_client_against_a_plain_server_is_told_why(operator):
+    """The mechanism mismatch says so; when the server closed every attempt before its greeting was read
+    (seen under load) the reason still names a daemon socket without CURVE among its two causes."""
     with (ServerThread(pub="tcp://127.0.0.1:*", cmd="tcp://127.0.0.1:*") as srv,
-          pytest.raises(TimeoutError, match="daemon's socket does not")):
+          pytest.raises(TimeoutError, match=r"daemon's socket (does not|use CURVE)")):
         request(srv.cmd, {"cmd": "status"}, timeout_s=REFUSED_WAIT_S, curve=operator)
     assert srv.calls == []
 

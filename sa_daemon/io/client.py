@@ -49,7 +49,8 @@ class _HandshakeWatch:
             return 2, "this client uses CURVE but the daemon's socket does not (check zmq.curve_pub, curve_server_secret)"
         if kind == zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL:
             if self.curve is not None:
-                return 1, "CURVE handshake failed: is zmq.curve_server_public the daemon's server.key?"
+                return 1, ("CURVE handshake failed: is zmq.curve_server_public the daemon's server.key, and "
+                           "does the daemon's socket use CURVE (zmq.curve_pub, curve_server_secret)?")
             return 1, ("the daemon closed the connection during the handshake: does it require CURVE "
                        "(zmq.curve_client_secret, zmq.curve_server_public)?")
         return 0, "the connection handshake failed"
