@@ -81,9 +81,9 @@ class IntentConfig(_Section):
     turn_charge: float = Field(
         0.0, ge=0, le=1,
         description="while the input turns without moving, each goal is charged this share of the time form's "
-        "translation step cost (T x slope of V) at the distance to the nearer of its grasp and its pre-grasp "
-        "point: time spent turning is not spent approaching; 0 = the paper's MaxEnt IOC, the default (measured in "
-        "session 22 and left off: with assistance it reads where the robot took the gripper; docs/model.md, The tracker)",
+        "translation step cost (T x slope of V) at the distance from where the user last translated to the "
+        "nearer of its grasp and its pre-grasp point: time spent turning is not spent approaching; 0 = the "
+        "paper's MaxEnt IOC, the default (measured in sessions 22-23 and left off; docs/model.md, The tracker)",
     )
     copy_weights: Literal["equal", "poses"] = Field(
         "equal",

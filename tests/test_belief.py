@@ -833,3 +833,29 @@ def test_standing_still_and_moving_pay_no_turn_charge_and_the_time_form_none(u):
             assert b.probs[0] > a.probs[0]
         else:  # the time form already charges every step its time
             np.testing.assert_array_equal(a.probs, b.probs)
+
+
+def test_the_charge_is_measured_where_the_user_last_translated_not_where_the_robot_took_the_gripper():
+    """The user drives to the first goal and turns; meanwhile assistance carries the gripper to the second
+    (``near_second``). The turn is still a turn where the user left the gripper: it favours the first goal
+    by exactly the charge measured there, and a belief that never saw the user translate (anchor at the
+    gripper) reads the same turn the other way."""
+    goals = (offset(), offset(dy=0.15))
+    near_second = Pose.from_rpy(offset(dy=0.15), (math.pi - 0.5, 0.0, 0.0))
+    drove = twins(*goals).after_input(TILTED, np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]), CHARGED)
+    np.testing.assert_array_equal(drove.anchor, TILTED.position)
+    turned = drove.after_input(near_second, TURN_BACK, CHARGED)
+    np.testing.assert_array_equal(turned.anchor, TILTED.position)  # a turn does not move the anchor
+    want = 10.0 * 0.03 * T * (slope_trans(0.15) - slope_trans(0.0))
+    shift = math.log(turned.probs[0] / turned.probs[1]) - math.log(drove.probs[0] / drove.probs[1])
+    assert shift == pytest.approx(want, rel=1e-9)
+    fresh = twins(*goals).after_input(near_second, TURN_BACK, CHARGED)
+    np.testing.assert_array_equal(fresh.anchor, near_second.position)  # no input yet: the gripper
+    assert math.log(fresh.probs[0] / fresh.probs[1]) == pytest.approx(-want, rel=1e-9)
+
+
+def test_the_anchor_survives_answers_and_resampling():
+    b = twins(offset(), offset(dy=0.15)).after_input(TILTED, np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0]), CHARGED)
+    for after in (b.after_answer("object1:top", False, CHARGED), b.after_answer("object0:top", True, CHARGED),
+                  b.resampled(GRIPPER, CHARGED)):
+        np.testing.assert_array_equal(after.anchor, TILTED.position)

@@ -164,6 +164,23 @@ def test_plan_on_a_stale_goal_set_is_adopted_and_carried_over():
     np.testing.assert_allclose(tick.command.robot_twist, want.robot_twist, atol=1e-12)
 
 
+def test_the_snapshot_carries_where_the_user_last_translated():
+    """The belief's anchor (the gripper's position at the user's last translating input, from which a
+    turn's charge is measured) reaches the planner; input that does not translate leaves it where it was,
+    and it survives the plain form the snapshot can be written in. A snapshot refuses a non-finite one."""
+    ctl = make_ctl()
+    feed(ctl, toward(TARGET), 0.0)
+    elsewhere = Pose(START.position + np.array([0.05, -0.02, 0.0]), START.quat_wxyz)
+    feed(ctl, np.zeros(3), DT, elsewhere)  # the robot moved the gripper; the user let go
+    snap = ctl.snapshot(elsewhere, None)
+    np.testing.assert_array_equal(snap.anchor, START.position)
+    np.testing.assert_array_equal(Snapshot.from_dict(snap.to_dict()).anchor, START.position)
+    feed(ctl, toward(TARGET, elsewhere), 2 * DT, elsewhere)
+    np.testing.assert_array_equal(ctl.snapshot(elsewhere, None).anchor, elsewhere.position)
+    with pytest.raises(ValueError, match="anchor"):
+        Snapshot(snap.goals, snap.probs, snap.pose, snap.user_twist, anchor=[0.1, np.nan, 0.2])
+
+
 # -- 2. questions ---------------------------------------------------------------------------------------
 
 

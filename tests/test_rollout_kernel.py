@@ -52,8 +52,9 @@ def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watc
     for trial in range(4):
         positions, quats, weights, kp, kq, actions = _problem(rng, twins=trial % 2 == 1)
         speed, dt = (rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.4)), rng.uniform(0.3, 1.0)
+        anchor = None if trial < 2 else kp[trial] + 0.01  # where the user last translated (None: start 0)
         R = [Rollouts(cfg, positions, quats, weights, kp, kq, actions, mode, speed, steps=4, dt=dt,
-                      watch_steps=watch_steps, compiled=compiled) for compiled in (False, True)]
+                      watch_steps=watch_steps, compiled=compiled, anchor=anchor) for compiled in (False, True)]
         arrivals += int(np.sum(np.diff(R[1].value, axis=-1) > 50.0))  # the +100 bonus net of a step's R_d
         for field in FIELDS[:2] + (FIELDS[2:] if watch_steps else ()):
             a, b = getattr(R[0], field), getattr(R[1], field)
@@ -113,8 +114,8 @@ def test_a_start_rolled_out_twice_stores_the_same_numbers():
         targets = np.array([a.goal if a.kind is ActionKind.MOVE else 0 for a in actions])
         fp, hp, rp = kernel.parameters(config_from_dict({}, "test"), (0.03, 0.3), 0.5)
         again = np.zeros(len(positions), dtype=bool)
-        inputs = (positions, quats, np.log(np.maximum(weights, 1e-300)), kp, kq, pregrasp_points(kp, kq, 0.06), kind,
-                  targets, mode is Mode.TRANSLATION, True, False, 4, 2, 0.5, fp, hp, rp)
+        inputs = (positions, quats, np.log(np.maximum(weights, 1e-300)), kp, kq, pregrasp_points(kp, kq, 0.06),
+                  positions[0], kind, targets, mode is Mode.TRANSLATION, True, False, 4, 2, 0.5, fp, hp, rp)
         outputs = tuple(getattr(R, f) for f in FIELDS)
         kernel.roll(*inputs, np.array([2, 0, 2]), again, 0, len(kp), *outputs)
         kernel.roll(*inputs, np.array([2]), np.zeros(len(positions), dtype=bool), 0, len(kp), *outputs)
@@ -174,3 +175,25 @@ def test_without_watched_steps_the_watch_arrays_are_empty_in_both_forms(compiled
                  (0.03, 0.3), steps=3, dt=1.0, compiled=compiled)
     assert all(getattr(R, f).size == 0 for f in FIELDS[2:])
     assert R.value.shape == (3, 5, 5, 4) and np.all(np.isfinite(R.value))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_turn_in_the_rollouts_is_charged_where_the_user_last_translated(compiled):
+    """Turning, the watch model's tracker measures the charge at ``anchor`` (the user's point), in both
+    forms: the default is the first start's position, and an anchor at goal 1 favours goal 1 over one at
+    goal 0 in the likelihood, by the same amount for every watched step in which the predicted user turns
+    (none once at its goal's orientation: no turn, no charge)."""
+    cfg = config_from_dict({"planner": {"threads": 1}, "intent": {"turn_charge": 0.2}}, "test")
+    positions, quats, weights, kp, kq, actions = _problem(np.random.default_rng(3))
+
+    def loglik(anchor):
+        return Rollouts(cfg, positions, quats, weights, kp, kq, actions, Mode.ROTATION, (0.03, 0.3), steps=3,
+                        dt=0.5, watch_steps=2, compiled=compiled, anchor=anchor).loglik
+
+    np.testing.assert_array_equal(loglik(None), loglik(positions[0]))
+    at0, at1 = loglik(kp[0]), loglik(kp[1])
+    gain = (at1[..., 1] - at1[..., 0]) - (at0[..., 1] - at0[..., 0])
+    step = gain.max() / 2  # two watched steps
+    assert step > 0.0 and np.mean(gain == 2 * step) > 0.5
+    np.testing.assert_allclose(gain / step, np.round(gain / step), atol=1e-9)
+    assert np.all(gain >= 0.0)

@@ -42,7 +42,9 @@ move-generator HO the defaults, and a question's time 2.5 s; session 10 HO follo
 in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds). A file without
 ``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``; one
 without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone; one without
-``intent.turn_charge`` (session 22) charged a turn nothing."""
+``intent.turn_charge`` (session 22) charged a turn nothing. The ``-turn-charge`` files (session 22) measured
+the charge where the gripper was; since session 23 it is measured where the user last translated, so they
+rerun with that measure (the ``-turn-anchor`` files')."""
 
 
 def _config(recorded: dict) -> Config:

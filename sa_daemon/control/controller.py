@@ -330,7 +330,7 @@ class Controller:
         cap = self._cfg.asking.max_per_task
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
                         self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
-                        questions_left=max(0, cap - len(self._asked)) if cap else None)
+                        questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor)
         self._issued[snap] = self._task
         return snap
 

@@ -75,6 +75,10 @@ class Belief:
     pose_log_w: FloatArray | None = None
     """``intent.poses = "tracked"``: each goal's posterior over its own grasp poses, ``(G, K)`` log-weights
     normalised per goal (``-inf`` on padding); ``None``: uniform over its poses."""
+    anchor: FloatArray | None = None
+    """Where the user last drove the gripper (m, base frame): its position at the last input sample that
+    translated (``None``: no input yet). A turn's charge (``intent.turn_charge``) is measured from here, not
+    from where the gripper is: assistance moves the gripper while the user turns (docs/model.md)."""
 
     def __post_init__(self) -> None:
         lp = np.array(self.log_p, dtype=float)
@@ -115,11 +119,12 @@ class Belief:
         return self.goals.target_probabilities(self.probs)
 
     def _with(self, log_p: FloatArray, confirmed: str | None = None, ruled_out: frozenset[str] = frozenset(),
-              pose_log_w: FloatArray | None = None) -> Belief:
+              pose_log_w: FloatArray | None = None, anchor: FloatArray | None = None) -> Belief:
         """A belief over the same goals with ``log_p``, the answers so far plus the new ones, and the pose
-        weights (``None``: the current ones)."""
+        weights and anchor (``None``: the current ones)."""
         return Belief(self.goals, log_p, confirmed or self.confirmed, self.ruled_out | ruled_out,
-                      self.pose_log_w if pose_log_w is None else pose_log_w)
+                      self.pose_log_w if pose_log_w is None else pose_log_w,
+                      self.anchor if anchor is None else anchor)
 
     def pose_weights(self) -> FloatArray:
         """Each goal's log-weights over its grasp poses for ``intent.poses = "tracked"``, ``(G, K)``."""
@@ -159,27 +164,29 @@ class Belief:
         u = _check_finite("user_twist", user_twist, (6,))
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
+        anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
         if cfg.poses == "nearest":
             nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, positions, quats, cfg,
-                                              cfg.rotation_scale)
+                                              cfg.rotation_scale, anchor)
         elif cfg.poses == "marginal":
-            nll = marginal_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg)
+            nll = marginal_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor)
         else:  # tracked: Bayes over each goal's poses, from uniform, along the whole input
-            per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg)
+            per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()
             nll = mixture_nll(log_w, per)
             pose_log_w = log_w - per + nll[:, None]  # normalised per goal: sum_k w_k exp(-per_k) = exp(-nll)
             pose_log_w.setflags(write=False)
         free = self._competing()
         if free is None:
-            return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w)
+            return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w, anchor=anchor)
         # Only the free goals compete, within their joint probability; answered targets keep theirs.
         lp = np.array(self.log_p)
         inner = lp[free] - nll[free]
         lp[free] = log_sum_exp(lp[free]) + inner - log_sum_exp(inner)
         if self.confirmed is None:
             lp = self._normalised(lp, cfg.cap, free)
-        return self._with(lp, pose_log_w=pose_log_w)
+        return self._with(lp, pose_log_w=pose_log_w, anchor=anchor)
+
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -271,4 +278,4 @@ class Belief:
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out)  # pose weights uniform again, as the copies are
+        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out, anchor=self.anchor)  # pose weights uniform again, as the copies are

@@ -71,7 +71,10 @@ def turn_charge(position: FloatArray, goal_positions: FloatArray, goal_quats: Fl
     rationality): ``intent.turn_charge x T x slope_t(d)``, a share of the time form's step cost (time
     spent turning is not spent approaching), ``d`` (m) the distance from ``position`` ``(..., 3)`` to the
     nearer of the grasp and its pre-grasp point ``intent.user_standoff_m`` behind it along its approach
-    (a user who turns at the stand-off has arrived). Goals ``(G, 3)``/``(G, 4)``; shape ``(..., G)``.
+    (a user who turns at the stand-off has arrived). ``position`` is where the *user* left the gripper,
+    its position at their last translating input (:attr:`~.belief.Belief.anchor`), not where it is: under
+    assistance the robot moves it while the user turns, and a charge read there would read the robot's
+    own motion as the user's evidence. Goals ``(G, 3)``/``(G, 4)``; shape ``(..., G)``.
     Near the grasp the slope is Huber's constant ``a``, far from it ``c + a``: the charge tells a goal
     the gripper has reached from one it has not, never two goals equally far."""
     p = np.asarray(position)[..., None, :]
@@ -87,21 +90,22 @@ def q_minus_v(
     goal_quats: FloatArray,
     cfg: IntentConfig,
     rotation_scale: float = 1.0,
+    anchor: FloatArray | None = None,
 ) -> FloatArray:
     """``Q_g(x, u) - V_g(x)`` for every goal, the MaxEnt IOC negative log-likelihood of ``u`` (per unit of
-    rationality; ``rotation_scale`` as in :func:`q_minus_v_at`).
+    rationality; ``rotation_scale`` and ``anchor`` as in :func:`q_minus_v_at`).
 
     ``goal_positions`` is ``(G, K, 3)``; the goal's ``V`` and ``Q`` come from its lowest-value pose.
     Returns shape ``(G,)``.
     """
     gp, gq = nearest_goal_poses(position, quat, goal_positions, goal_quats, cfg)
-    return q_minus_v_at(position, quat, user_twist, gp, gq, cfg, rotation_scale)
+    return q_minus_v_at(position, quat, user_twist, gp, gq, cfg, rotation_scale, anchor=anchor)
 
 
 def q_minus_v_at(
     position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
     goal_quats: FloatArray, cfg: IntentConfig, rotation_scale: float = 1.0,
-    distances: tuple[FloatArray, FloatArray] | None = None,
+    distances: tuple[FloatArray, FloatArray] | None = None, anchor: FloatArray | None = None,
 ) -> FloatArray:
     """``Q_g(x, u) - V_g(x)`` against one pose per goal, ``(G, 3)``/``(G, 4)``, for poses ``(..., 3)``,
     ``(..., 4)`` and twists ``(..., 6)``: shape ``(..., G)``. ``Q`` applies ``u`` for
@@ -109,7 +113,8 @@ def q_minus_v_at(
     "time"``), each part also times the input's speed in it (m/s, rad/s; ``"path"``). ``Q - V`` is a
     translation part plus a rotation part; ``rotation_scale`` multiplies the latter (the tracker's
     ``IntentConfig.rotation_scale``). ``distances``: the translation (m) and rotation (rad) distances to
-    the goals now, ``(..., G)``, if the caller has them (:func:`pose_distances`).
+    the goals now, ``(..., G)``, if the caller has them (:func:`pose_distances`). ``anchor`` ``(..., 3)``
+    (m): where the turn charge is measured (:func:`turn_charge`; ``None``: at ``position``).
 
     With the path step cost a part the input does not drive costs nothing and, where applying the input
     leaves that part of the pose exactly as it was, its ``V`` does not change: that part is exactly zero
@@ -136,7 +141,8 @@ def q_minus_v_at(
             - huber_value(d_r, cfg.rotation)
     if path and cfg.turn_charge > 0.0 and u[..., 3:].any():  # a turn without a move pays for the time
         turning = ~np.any(u[..., :3] != 0.0, axis=-1) & (norms(u[..., 3:]) > TURNING_RADPS)
-        trans = trans + np.where(turning, turn_charge(position[..., 0, :], goal_positions, goal_quats, cfg), 0.0)
+        at = position[..., 0, :] if anchor is None else anchor
+        trans = trans + np.where(turning, turn_charge(at, goal_positions, goal_quats, cfg), 0.0)
     return trans + rotation_scale * rot
 
 
@@ -149,17 +155,17 @@ def pose_distances(position: FloatArray, quat: FloatArray, goal_positions: Float
 
 def pose_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
              goal_quats: FloatArray, cfg: IntentConfig,
-             distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
+             distances: tuple[FloatArray, FloatArray] | None = None, anchor: FloatArray | None = None) -> FloatArray:
     """``-log P(u | pose)`` (nats) of one input sample against every grasp pose ``(G, K, ...)``: ``Q - V`` of
     the pose with its translation part weighed by ``beta`` (``intent.rationality``) and its rotation part
     by ``beta_r`` (``intent.rotation_rationality``). Shape ``(G, K)``. ``distances``:
-    :func:`pose_distances`, if the caller has them."""
+    :func:`pose_distances`, if the caller has them; ``anchor`` as in :func:`q_minus_v_at`."""
     G, K = goal_positions.shape[:2]
     gp, gq = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
     if distances is not None:
         distances = (distances[0].reshape(G * K), distances[1].reshape(G * K))
     return cfg.rationality * q_minus_v_at(position, quat, user_twist, gp, gq, cfg, cfg.rotation_scale,
-                                          distances).reshape(G, K)
+                                          distances, anchor).reshape(G, K)
 
 
 def pose_log_weights(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
@@ -182,31 +188,34 @@ def mixture_nll(log_w: FloatArray, nll: FloatArray) -> FloatArray:
 
 
 def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
-                 goal_quats: FloatArray, cfg: IntentConfig) -> FloatArray:
+                 goal_quats: FloatArray, cfg: IntentConfig, anchor: FloatArray | None = None) -> FloatArray:
     """``-log P(u | g)`` (nats) of one input sample for goals with several grasp poses ``(G, K, ...)``, the
     poses marginalised: ``P(u | g) = sum_k w_k exp(-(Q_k - V_k))`` with ``w_k = exp(-V_k) / sum_j exp(-V_j)``
     (:func:`pose_log_weights`, :func:`pose_nll`). This is MaxEnt IOC with the pose a latent sub-goal
     (``exp(-Q_k)`` summed over poses, normalised by ``exp(-V_k)`` summed): a goal's value is the soft
     minimum over its poses, and an input toward any of them is evidence for it. As the rationalities grow
-    it tends to ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). Shape ``(G,)``."""
+    it tends to ``beta (Q - V)`` of the lowest-value pose (``intent.poses = "nearest"``). ``anchor`` as in
+    :func:`q_minus_v_at`. Shape ``(G,)``."""
     d = pose_distances(position, quat, goal_positions, goal_quats)
     return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg, d),
-                       pose_nll(position, quat, user_twist, goal_positions, goal_quats, cfg, d))
+                       pose_nll(position, quat, user_twist, goal_positions, goal_quats, cfg, d, anchor))
 
 
 def q_minus_v_driven(
     position: FloatArray, quat: FloatArray, user_linear: FloatArray | None, user_angular: FloatArray | None,
     goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig, rotation_scale: float = 1.0,
+    anchor: FloatArray | None = None,
 ) -> FloatArray:
     """:func:`q_minus_v_at` for an input that drives one part only (the joystick's mode): ``user_linear``
     ``(..., 3)`` m/s with ``user_angular`` ``None``, or the reverse (rad/s). With the path step cost
     the part not driven adds nothing (its pose does not move, its cost is zero), so only the driven
-    part's Huber terms are computed: the same value, without the other part's distances."""
+    part's Huber terms are computed: the same value, without the other part's distances. ``anchor``
+    ``(..., 3)`` (m): where a turn's charge is measured (:func:`turn_charge`; ``None``: at ``position``)."""
     if cfg.step_cost != "path":
         lin = np.zeros(np.shape(user_angular)) if user_linear is None else user_linear
         ang = np.zeros(np.shape(user_linear)) if user_angular is None else user_angular
         return q_minus_v_at(position, quat, np.concatenate((lin, ang), axis=-1), goal_positions, goal_quats, cfg,
-                            rotation_scale)
+                            rotation_scale, anchor=anchor)
     T = cfg.action_apply_time_s
     scale = 1.0
     if user_angular is None:
@@ -223,7 +232,8 @@ def q_minus_v_driven(
         h, speed, scale = cfg.rotation, norms(w), rotation_scale
     out = scale * (T * huber_slope(d, h) * speed + huber_value(d1, h) - huber_value(d, h))
     if user_angular is not None and cfg.turn_charge > 0.0:  # a turn pays for the time (none standing still)
-        out = out + np.where(speed > TURNING_RADPS, turn_charge(position, goal_positions, goal_quats, cfg), 0.0)
+        at = position if anchor is None else anchor
+        out = out + np.where(speed > TURNING_RADPS, turn_charge(at, goal_positions, goal_quats, cfg), 0.0)
     return out
 
 

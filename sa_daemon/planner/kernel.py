@@ -126,10 +126,10 @@ def _turn_charge(px, py, pz, j, kp, pre, ct, hp):
 
 @njit(cache=True)
 def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, tz, j,
-               kp, kq, pre, T, ct, hp, rot_scale):
+               kp, kq, pre, anchor, T, ct, hp, rot_scale):
     """``Q_j - V_j`` of goal ``j`` for an input driving one part (``huber.q_minus_v_driven``, path step
-    cost; a turn also pays the turn charge ``ct``, :func:`_turn_charge`); ``t`` is ``q`` turned by the input
-    for ``T`` (used in rotation mode only)."""
+    cost; a turn also pays the turn charge ``ct`` measured at ``anchor``, :func:`_turn_charge`); ``t`` is
+    ``q`` turned by the input for ``T`` (used in rotation mode only)."""
     speed = math.sqrt(ux * ux + uy * uy + uz * uz)
     if translating:
         dx, dy, dz = kp[j, 0] - px, kp[j, 1] - py, kp[j, 2] - pz
@@ -142,7 +142,7 @@ def _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz, tw, tx, ty, 
     out = rot_scale * _turn_cost(v, slope, _angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], tw, tx, ty, tz), speed,
                                  T, hp)
     if ct > 0.0 and speed > TURNING_RADPS:
-        out += _turn_charge(px, py, pz, j, kp, pre, ct, hp)
+        out += _turn_charge(anchor[0], anchor[1], anchor[2], j, kp, pre, ct, hp)
     return out
 
 
@@ -181,7 +181,7 @@ def _first_same(kq):
 
 
 @njit(cache=True, nogil=True)
-def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, tracked, approach,
+def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translating, tracked, approach,
          steps, watch_steps, dt, fp, hp, rp, order, claimed, g_lo, g_hi,
          value, stay, watch_p, watch_q, watch_ret, loglik):
     """Fill the outputs of :class:`~.rollouts.Rollouts` (``value``, ``stay``, the watch arrays, ``loglik``)
@@ -194,7 +194,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
     per rollout step ``k``, terminal paper steps, move gains and top speeds (linear, angular), the turn
-    charge times ``T``.
+    charge times ``T``. ``pre``: the goals' pre-grasp points; ``anchor``: where the turn charge is
+    measured (m, :class:`~.rollouts.Rollouts`).
     ``hp``: the translation and rotation Huber ``c, delta, a, weight``. ``kind``/``targets``: per action
     its kind and, for moves, its goal.
     """
@@ -362,7 +363,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                     lw[j] -= samples * _move_cost(v0[j], sl0[j], dist1, speed, T, hp)
                                 elif update and translating:
                                     lw[j] -= samples * _q_minus_v(True, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
-                                                                  tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp, rot_scale)
+                                                                  tw, tx, ty, tz, j, kp, kq, pre, anchor, T, ct, hp,
+                                                                  rot_scale)
                                 elif update:  # Q - V of the turn: d1, the angle after it, is the error's norm
                                     if s == 0:
                                         v, slope = v0[j], sl0[j]
@@ -374,7 +376,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                                         v, slope = rot[o, 4], rot[o, 5]
                                     lw[j] -= samples * rot_scale * _turn_cost(v, slope, d1, speed, T, hp)
                                     if ct > 0.0 and speed > TURNING_RADPS:
-                                        lw[j] -= samples * _turn_charge(px, py, pz, j, kp, pre, ct, hp)
+                                        lw[j] -= samples * _turn_charge(anchor[0], anchor[1], anchor[2], j, kp,
+                                                                        pre, ct, hp)
                             lx, ly, lz = _clip(g_t * (lx - p1x), g_t * (ly - p1y), g_t * (lz - p1z), m_t)
                             hx, hy, hz = _clip(g_r * hx, g_r * hy, g_r * hz, m_r)
                             if translating:
@@ -394,13 +397,14 @@ def roll(positions, quats, log_w0, kp, kq, pre, kind, targets, translating, trac
                             for j in range(G):
                                 if a == 0:
                                     ll0[g, j] = samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy,
-                                                                     uz, tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp,
-                                                                     rot_scale)
+                                                                     uz, tw, tx, ty, tz, j, kp, kq, pre, anchor, T, ct,
+                                                                     hp, rot_scale)
                                 acc[j] = 0.0 - ll0[g, j]
                         elif s < watch_steps:
                             for j in range(G):
                                 acc[j] -= samples * _q_minus_v(translating, px, py, pz, qw, qx, qy, qz, ux, uy, uz,
-                                                               tw, tx, ty, tz, j, kp, kq, pre, T, ct, hp, rot_scale)
+                                                               tw, tx, ty, tz, j, kp, kq, pre, anchor, T, ct, hp,
+                                                               rot_scale)
                         if s + 1 == watch_steps:
                             for j in range(G):
                                 loglik[c, g, a, j] = acc[j]
@@ -451,7 +455,7 @@ def warm_up(cfg: Config) -> None:
     fp, hp, rp = parameters(cfg, (0.05, 0.2), 1.0)
     outputs = (np.empty((1, 2, 3, 3)), np.empty((1, 2)), np.empty((1, 2, 3, 3)), np.empty((1, 2, 3, 4)),
                np.empty((1, 2, 3)), np.zeros((1, 2, 3, 2)))
-    inputs = (kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05,
+    inputs = (kp[:1] + 0.1, kq[:1].copy(), np.log(np.full((1, 2), 0.5)), kp, kq, kp - 0.05, kp[0] + 0.1,
               np.array([MOVE, HO, NONE]), np.array([1, 0, 0]), True, True, False, 2, 1, 1.0, fp, hp, rp)
     roll(*inputs, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.bool_), 0, 2, *outputs)
 

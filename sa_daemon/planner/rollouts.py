@@ -71,6 +71,9 @@ class Rollouts:
     ``dt`` steps (s). ``compiled``: force the compiled (``True``) or the numpy form (``False``); ``None``
     (default) takes the compiled one where :func:`.kernel.supported`. ``pregrasp``: the goals' pre-grasp
     points ``(G, 3)`` (m) if the caller has them (``pregrasp_points``; computed here otherwise).
+    ``anchor``: where the user last translated (m, :attr:`~..model.belief.Belief.anchor`), from which the
+    tracker measures a turn's charge (``intent.turn_charge``); the predicted user of a rollout drives the
+    mode's part alone, so turning it never moves (``None``: the first start's position).
     ``background``: the compiled form is only started on the rollout threads, and the caller runs other
     Python meanwhile; the arrays are ready after :meth:`join` (or not to be read after :meth:`cancel`).
     """
@@ -80,14 +83,16 @@ class Rollouts:
     def __init__(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray,
                  kp: FloatArray, kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float],
                  steps: int, dt: float, watch_steps: int = 0, compiled: bool | None = None,
-                 pregrasp: FloatArray | None = None, background: bool = False) -> None:
+                 pregrasp: FloatArray | None = None, background: bool = False,
+                 anchor: FloatArray | None = None) -> None:
         if compiled is None:
             compiled = kernel.supported(cfg)
         if pregrasp is None:
             pregrasp = pregrasp_points(kp, kq, cfg.intent.user_standoff_m)
+        anchor = np.array(positions[0] if anchor is None else anchor, dtype=float)
         if compiled:
-            self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, actions, mode, speed, steps, dt,
-                           watch_steps, background)
+            self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, anchor, actions, mode, speed, steps,
+                           dt, watch_steps, background)
             return
         C, G, A = len(positions), len(kp), len(actions)
         translating = Mode(mode) is Mode.TRANSLATION
@@ -173,10 +178,10 @@ class Rollouts:
                     r_lin[:, :, h] = ho_lin
                 if not (tracked and translating):
                     r_ang[:, :, h] = ho_ang
-                if tracked and s + 1 < steps:  # (turning, HO's position is in ``free``: a turn's charge)
+                if tracked and s + 1 < steps:
                     log_w = log_w - samples * q_minus_v_driven(
                         P[:, :, h] if translating else free, Q[:, :, h], u_lin[:, :, h] if translating else None,
-                        None if translating else u_ang[:, :, h], kp, kq, cfg.intent, rot_scale)
+                        None if translating else u_ang[:, :, h], kp, kq, cfg.intent, rot_scale, anchor)
             t_lin = np.where(none_m, u_lin, (1.0 - alpha) * u_lin + alpha * r_lin)
             t_ang = np.where(none_m, u_ang, (1.0 - alpha) * u_ang + alpha * r_ang)
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)  # (HO's free part: no input there)
@@ -186,7 +191,8 @@ class Rollouts:
                     np.broadcast_to(P, (C, G, A, 3)) if translating else watched(P, free_part=True),
                     np.broadcast_to(Q, (C, G, A, 4)),
                     np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
-                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent, rot_scale)
+                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent, rot_scale,
+                    anchor)
             P = P + t_lin * dt
             Q = turn(Q, t_ang, dt)
             if tracked:  # the user does not drive this part: HO's share of the blend alone
@@ -222,7 +228,7 @@ class Rollouts:
         self.loglik = np.zeros((C, G, A, 0))
 
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
-                  kq: FloatArray, pregrasp: FloatArray, actions: list[Action], mode: Mode,
+                  kq: FloatArray, pregrasp: FloatArray, anchor: FloatArray, actions: list[Action], mode: Mode,
                   speed: tuple[float, float], steps: int, dt: float, watch_steps: int, background: bool) -> None:
         """The same rollouts by :func:`.kernel.roll` (one compiled loop per rollout)."""
         C, G, A = len(positions), len(kp), len(actions)
@@ -242,7 +248,7 @@ class Rollouts:
         inputs = (np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(quats, dtype=float),
                   np.log(np.maximum(np.asarray(weights, dtype=float), 1e-300)),
                   np.ascontiguousarray(kp, dtype=float), np.ascontiguousarray(kq, dtype=float),
-                  np.ascontiguousarray(pregrasp, dtype=float), kind, targets,
+                  np.ascontiguousarray(pregrasp, dtype=float), anchor, kind, targets,
                   Mode(mode) is Mode.TRANSLATION, cfg.planner.ho_belief == "tracked",
                   cfg.planner.terminal == "approach", steps, watch_steps, dt, fp, hp, rp)
         self._pending = Pending(threads(cfg), inputs, (self.value, self.stay, self.watch_positions, self.watch_quats,

@@ -152,7 +152,8 @@ class WatchSearch:
                   watch_steps: int = 0, background: bool = False) -> Rollouts:
         s = self.snap
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
-                        steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background)
+                        steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background,
+                        anchor=s.pose.position if s.anchor is None else s.anchor)
 
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
