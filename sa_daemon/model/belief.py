@@ -159,7 +159,8 @@ class Belief:
         its lowest-value one alone (``intent.poses``).
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
-        every input sample, also when the input is zero. NaN/inf input raises ``ValueError``.
+        every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
+        translates moves :attr:`anchor` to ``pose``'s position; any other leaves it.
         """
         u = _check_finite("user_twist", user_twist, (6,))
         positions, quats = self.goals.positions, self.goals.quats_wxyz
@@ -186,7 +187,6 @@ class Belief:
         if self.confirmed is None:
             lp = self._normalised(lp, cfg.cap, free)
         return self._with(lp, pose_log_w=pose_log_w, anchor=anchor)
-
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -278,4 +278,5 @@ class Belief:
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out, anchor=self.anchor)  # pose weights uniform again, as the copies are
+        # pose weights uniform again, as the copies are
+        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out, anchor=self.anchor)
