@@ -78,7 +78,8 @@ def turn_charge(position: FloatArray, goal_positions: FloatArray, goal_quats: Fl
     Near the grasp the slope is Huber's constant ``a``, far from it ``c + a``: the charge tells a goal
     the gripper has reached from one it has not, never two goals equally far."""
     p = np.asarray(position)[..., None, :]
-    d = np.minimum(norms(goal_positions - p), norms(pregrasp_points(goal_positions, goal_quats, cfg.user_standoff_m) - p))
+    pre = pregrasp_points(goal_positions, goal_quats, cfg.user_standoff_m)
+    d = np.minimum(norms(goal_positions - p), norms(pre - p))
     return cfg.turn_charge * cfg.action_apply_time_s * huber_slope(d, cfg.translation)
 
 

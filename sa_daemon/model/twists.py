@@ -122,7 +122,6 @@ def ho_angular(quat: FloatArray, goal_quats: FloatArray, weights: FloatArray, cf
     return clip_norm(cfg.move.angular_gain * error, cfg.move.angular_max_radps)
 
 
-
 def user_linear(position: FloatArray, goal_position: FloatArray, pregrasp: FloatArray, speed: float,
                 standoff_m: float) -> FloatArray:
     """The watch model's prediction of the joystick in translation mode (m/s; ``docs/model.md``): a user

@@ -25,7 +25,7 @@ class Snapshot:
     ``questions_left`` caps the questions the rest of the task may hold (the person's
     ``asking.max_per_task``; ``None``: no cap, 0: no question). ``anchor``: where the user last
     translated (m, base frame; :attr:`~..model.belief.Belief.anchor`), from which the watch model's
-    tracker measures a turn's charge (``None``: at ``pose``).
+    tracker measures a turn's charge (``None``: at ``pose``, as a belief that has seen no input).
     """
 
     goals: GoalSet
@@ -61,11 +61,10 @@ class Snapshot:
             if len(speed) != 2 or not all(math.isfinite(v) and v >= 0 for v in speed):
                 raise ValueError("user_speed must be two finite, non-negative numbers (m/s, rad/s)")
         object.__setattr__(self, "user_speed", speed)
-        if self.anchor is not None:
-            a = np.array(self.anchor, dtype=float)
-            if a.shape != (3,) or not np.all(np.isfinite(a)):
-                raise ValueError("anchor must be None or 3 finite numbers (m)")
-            object.__setattr__(self, "anchor", a)
+        a = np.array(self.pose.position if self.anchor is None else self.anchor, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise ValueError("anchor must be None or 3 finite numbers (m)")
+        object.__setattr__(self, "anchor", a)
         if self.questions_left is not None and (not isinstance(self.questions_left, int) or self.questions_left < 0):
             raise ValueError("questions_left must be None or an integer >= 0")
 
@@ -83,7 +82,7 @@ class Snapshot:
             "node_budget": self.node_budget,
             "user_speed": list(self.user_speed),
             "questions_left": self.questions_left,
-            "anchor": None if self.anchor is None else self.anchor.tolist(),
+            "anchor": self.anchor.tolist(),
         }
 
     @classmethod
