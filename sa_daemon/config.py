@@ -472,12 +472,12 @@ class JoystickConfig(_Section):
 
 
 class SpeechConfig(_Section):
-    """Spoken questions (pyttsx3 + espeak-ng, in one dedicated worker thread)."""
+    """Spoken questions (espeak-ng, in one dedicated worker thread)."""
 
     enabled: bool = Field(True, description="speak questions (they are always published as events)")
     rate_wpm: int = Field(150, ge=50, le=400, description="words per minute")
     volume: float = Field(1.0, ge=0, le=1)
-    voice: str = Field("", max_length=64, description="espeak-ng voice, e.g. en-gb ('' = the engine's default)")
+    voice: str = Field("", max_length=64, description="espeak-ng voice, e.g. en-us or en-gb-x-rp ('' = espeak-ng's English, en)")
     wav_dir: str = Field("", description="also write each utterance to a WAV file here (empty: no files)")
     play: bool = Field(True, description="play through the sound card (off: WAV files only)")
     library: Literal["auto", "system", "wheel"] = Field(
@@ -496,7 +496,7 @@ class VoiceConfig(_Section):
     source: str = Field("alsa", min_length=1, description="alsa | pcm:PATH | wav:PATH")
     device: str = Field("default", min_length=1, description="ALSA capture device for source alsa (arecord -D)")
     min_confidence: float = Field(
-        0.8, ge=0, le=1, description="a recognised yes/no below this confidence is ignored (docs/daemon.md)"
+        0.85, ge=0, le=1, description="a recognised yes/no below this confidence is ignored (docs/daemon.md)"
     )
     listen_s: float = Field(8.0, gt=0, le=120, description="listen this long after the question was spoken (s)")
     after_speech_s: float = Field(

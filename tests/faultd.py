@@ -12,8 +12,8 @@ runs the real command line (:func:`sa_daemon.cli.main`) in this process after in
   ``OSError(ENODEV)``, as the kernel's evdev does. One stick is plugged at start.
 * **access to the fake xArm** - the ``FakeXArmAPI`` the daemon builds for ``[arm.xarm] sdk = "fake"`` is
   recorded (a subclass that can also report a NaN pose, as a corrupt report would).
-* **the speech engine boundary** - ``pyttsx3.init`` can be made to raise (``--speech-init fail``), and
-  the engine it returns can be made to fail or hang on command. The sound-card boundary needs no patch:
+* **the speech engine boundary** - making the espeak-ng engine (``speech.engine.engine``) can be made
+  to raise (``--speech-init fail``), and the engine it returns can be made to fail or hang on command. The sound-card boundary needs no patch:
   the tests put a fake ``aplay`` on ``PATH``.
 
 Commands, one per line on stdin; each is answered by one line ``FAULTD {json}`` on stdout with ``ok``
@@ -282,7 +282,7 @@ def install_xarm() -> None:
 
 
 class EngineProxy:
-    """A real pyttsx3 engine whose utterances can be made to fail or hang (``FD.speech_mode``)."""
+    """The real espeak-ng engine whose utterances can be made to fail or hang (``FD.speech_mode``)."""
 
     def __init__(self, engine: Any) -> None:
         self._engine = engine
@@ -290,28 +290,25 @@ class EngineProxy:
     def __getattr__(self, name: str) -> Any:
         return getattr(self._engine, name)
 
-    def save_to_file(self, text: str, filename: str) -> None:
+    def save_wav(self, text: str, path: str) -> Any:
         if FD.speech_mode == "fail":
             raise RuntimeError("injected: the speech driver failed")
-        self._engine.save_to_file(text, filename)
-
-    def runAndWait(self) -> None:
         if FD.speech_mode == "hang":
             FD.speech_release.wait()  # until speech_ok, or forever
-        self._engine.runAndWait()
+        return self._engine.save_wav(text, path)
 
 
 def install_speech() -> None:
-    import pyttsx3
+    from sa_daemon.speech import engine as engine_mod
 
-    real = pyttsx3.init
+    real = engine_mod.engine
 
-    def init(*args: Any, **kwargs: Any) -> Any:
+    def engine(*args: Any, **kwargs: Any) -> Any:
         if FD.speech_init_fail:
             raise RuntimeError("injected: no speech driver")
         return EngineProxy(real(*args, **kwargs))
 
-    pyttsx3.init = init
+    engine_mod.engine = engine
 
 
 def install_daemon_hook() -> None:
@@ -501,7 +498,7 @@ def command_thread() -> None:
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="faultd.py", usage="%(prog)s [--speech-init fail] -- run ...")
-    parser.add_argument("--speech-init", choices=["ok", "fail"], default="ok", help="pyttsx3.init raises")
+    parser.add_argument("--speech-init", choices=["ok", "fail"], default="ok", help="making the speech engine raises")
     split = argv.index("--") if "--" in argv else len(argv)
     own, cli_argv = parser.parse_args(argv[:split]), argv[split + 1:]
     FD.speech_init_fail = own.speech_init == "fail"

@@ -99,16 +99,18 @@ def wav_stats(path: str | Path) -> tuple[int, int, int, float, float]:
 SYNTH = """
 import json, sys
 from sa_daemon.speech import espeak
-engine = espeak.pyttsx3_engine(sys.argv[1])
+from sa_daemon.speech.engine import engine
+speaker = engine(sys.argv[1])
 for path, text, voice, rate in json.loads(sys.stdin.read()):
-    espeak.synthesise(engine, text, path, voice, rate)
+    speaker.configure(rate_wpm=rate, voice=voice)
+    speaker.save_wav(text, path)
 print(json.dumps(espeak.loaded().as_dict()))
 """
 
 
 def synth_wavs(folder: Path, items: dict[str, tuple[str, str, int]], library: str = "auto") -> dict:
     """Speak each ``name: (text, voice, rate)`` with espeak-ng into ``folder/name.wav``, in a child process
-    (pyttsx3 keeps one engine per process and thread); returns the library it used (``EspeakLibrary``'s dict)."""
+    (a process holds one espeak-ng library, ``library``); returns the library it used (``EspeakLibrary``'s dict)."""
     folder.mkdir(parents=True, exist_ok=True)
     jobs = [(str(folder / f"{name}.wav"), *spec) for name, spec in items.items()]
     r = subprocess.run([sys.executable, "-c", SYNTH, library], input=json.dumps(jobs), capture_output=True,

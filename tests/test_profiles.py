@@ -33,11 +33,11 @@ X, Y, RZ = ecodes.ABS_X, ecodes.ABS_Y, ecodes.ABS_RZ
 def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     p = parse_profile({"name": "alex", "summary": "left hand", "joystick": {"gains": [1.0, 0.8, 0.5], "deadzone": 0.1},
                        "input": {"filter_hz": 3.0}, "blend": {"alpha": 0.3},
-                       "speech": {"rate_wpm": 120, "voice": "en-gb"},
+                       "speech": {"rate_wpm": 120, "voice": "en-gb-x-rp"},
                        "asking": {"max_per_task": 2, "answer_sources": ["button"]}}, "alex.toml")
     cfg = p.apply(Config())
     assert cfg.joystick.gains == (1.0, 0.8, 0.5) and cfg.joystick.deadzone == 0.1 and cfg.input.filter_hz == 3.0
-    assert cfg.blend.alpha == 0.3 and cfg.speech.rate_wpm == 120 and cfg.speech.voice == "en-gb"
+    assert cfg.blend.alpha == 0.3 and cfg.speech.rate_wpm == 120 and cfg.speech.voice == "en-gb-x-rp"
     assert cfg.asking.max_per_task == 2 and cfg.asking.answer_sources == ("button",)
     untouched = Config().model_dump()
     for section in ("planner", "reward", "safety", "limits", "intent"):

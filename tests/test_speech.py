@@ -1,4 +1,4 @@
-"""Spoken questions: question text, real pyttsx3 + espeak-ng synthesis to WAV (from the system library or
+"""Spoken questions: question text, real espeak-ng synthesis to WAV (from the system library or
 the pip wheel's), what happens to each question (played / written / unavailable), and a speaker that never
 blocks its caller (no engine, a failing engine, a hung engine)."""
 
@@ -13,10 +13,13 @@ import time
 import wave
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import synth_wavs, wav_stats
 
 from sa_daemon.config import SpeechConfig
+from sa_daemon.speech.engine import engine
+from sa_daemon.speech.espeak import read_wav
 from sa_daemon.speech.speaker import Speaker, Spoken, echo_text, question_text
 
 
@@ -132,31 +135,29 @@ def test_no_engine_means_unavailable_and_say_returns_false():
 
 
 class FakeEngine:
-    """pyttsx3's engine surface; ``runAndWait`` blocks until ``release`` (a hung driver) if ``hang``,
-    raises if ``fail``, else writes a tiny WAV where ``save_to_file`` asked."""
+    """The engine's surface (``speech.engine.Engine``); ``save_wav`` blocks until ``release`` (a hung
+    driver) if ``hang``, raises if ``fail``, else writes a tiny WAV. ``voices`` the voices it knows."""
 
-    def __init__(self, hang: bool = False, fail: bool = False) -> None:
-        self.hang, self.fail = hang, fail
+    def __init__(self, hang: bool = False, fail: bool = False, voices: tuple[str, ...] = ("", "en-us")) -> None:
+        self.hang, self.fail, self.voices = hang, fail, voices
         self.props: dict = {}
         self.entered = threading.Event()
         self.release = threading.Event()
         self.calls = 0
-        self._path: str | None = None
 
-    def setProperty(self, name, value):
-        self.props[name] = value
+    def configure(self, rate_wpm=None, volume=None, voice=None):
+        if voice is not None and voice not in self.voices:
+            raise ValueError(f"espeak-ng has no voice {voice!r}")
+        self.props.update({k: v for k, v in (("rate", rate_wpm), ("volume", volume), ("voice", voice)) if v is not None})
 
-    def save_to_file(self, text, path):
-        self._path = path
-
-    def runAndWait(self):
+    def save_wav(self, text, path):
         self.calls += 1
         self.entered.set()
         if self.hang:
             self.release.wait(30.0)
         if self.fail:
             raise OSError("driver crashed")
-        with wave.open(self._path, "wb") as w:
+        with wave.open(str(path), "wb") as w:
             w.setnchannels(1)
             w.setsampwidth(2)
             w.setframerate(22050)
@@ -168,7 +169,54 @@ def test_engine_properties_come_from_the_config(tmp_path):
     sp = Speaker(SpeechConfig(rate_wpm=120, volume=0.5, wav_dir=str(tmp_path), play=False), engine_factory=lambda: eng)
     try:
         assert sp.wait_ready(5.0)
-        assert eng.props == {"rate": 120, "volume": 0.5}
+        assert eng.props == {"rate": 120, "volume": 0.5, "voice": ""}
+    finally:
+        sp.close()
+
+
+def test_each_utterance_is_spoken_at_its_own_rate_the_same_in_every_process(tmp_path):
+    """pyttsx3's espeak driver (sessions 1-23) ran espeak-ng asynchronously and applied a new rate late,
+    at random: 120 words a minute after 200 came out at either. The engine is synchronous: each
+    utterance at its own rate, the same samples in two processes."""
+    rates = (120, 200, 120, 200, 160, 120, 200, 120)
+    items = {f"u{i}": ("another grasp please", "en-us+f2", r) for i, r in enumerate(rates)}
+    runs = []
+    for run in ("a", "b"):
+        synth_wavs(tmp_path / run, items)
+        runs.append({n: read_wav(tmp_path / run / f"{n}.wav")[0] for n in items})
+    assert all(np.array_equal(runs[0][n], runs[1][n]) for n in items)
+    by_rate = {r: [len(runs[0][f"u{i}"]) for i, q in enumerate(rates) if q == r] for r in set(rates)}
+    assert max(by_rate[200]) < min(by_rate[160]) <= max(by_rate[160]) < min(by_rate[120]), by_rate
+    assert max(by_rate[120]) - min(by_rate[120]) < 0.02 * min(by_rate[120]), by_rate
+
+
+def test_an_unknown_voice_is_refused_and_changes_nothing():
+    eng = engine()
+    eng.configure(rate_wpm=150, volume=1.0, voice="en-us")
+    before = eng.synthesise("yes")
+    with pytest.raises(ValueError, match="no voice 'xx-no-such-voice'"):
+        eng.configure(rate_wpm=300, voice="xx-no-such-voice")
+    assert eng.voice == "en-us"
+    after = eng.synthesise("yes")  # espeak-ng carries a few samples of state from one utterance to the next
+    assert abs(len(after) - len(before)) < 0.01 * len(before)  # at 300 words a minute: far shorter
+
+
+def test_a_profile_with_an_unknown_voice_is_named_and_the_previous_voice_speaks_on(tmp_path):
+    eng = FakeEngine()
+    done: list[Spoken] = []
+    sp = Speaker(SpeechConfig(voice="en-us", wav_dir=str(tmp_path), play=False), on_done=done.append,
+                 engine_factory=lambda: eng)
+    try:
+        assert sp.wait_ready(5.0)
+        sp.configure(SpeechConfig(voice="xx-no-such-voice", rate_wpm=300, wav_dir=str(tmp_path), play=False))
+        assert sp.say("first") and sp.say("second")
+        deadline = time.monotonic() + 10
+        while len(done) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert [s.outcome for s in done] == ["written", "written"]
+        assert "speech.voice" in done[0].error and "xx-no-such-voice" in done[0].error
+        assert "kept the previous voice" in done[0].error and done[1].error is None
+        assert eng.props == {"voice": "en-us", "rate": 150, "volume": 1.0}  # nothing changed
     finally:
         sp.close()
 
@@ -199,7 +247,7 @@ def test_a_hung_engine_never_blocks_say_and_drops_when_the_queue_is_full():
     try:
         assert sp.wait_ready(5.0)
         assert sp.say("one") is True
-        assert eng.entered.wait(10.0)  # the speech thread is now stuck in runAndWait
+        assert eng.entered.wait(10.0)  # the speech thread is now stuck in save_wav
         assert sp.busy_since is not None
         results, slowest = [], 0.0
         for i in range(10):

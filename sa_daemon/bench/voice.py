@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
-import tempfile
 import time
 from collections import Counter
 from functools import partial
@@ -33,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from ..config import VoiceConfig
-from ..speech import espeak
 from ..speech.audio import answer_in
+from ..speech.engine import engine
 from ..speech.recogniser import SAMPLE_RATE, AnswerRecogniser, to_16k
 
 YES_PHRASES = ("yes", "yeah", "yep", "yup", "yes please")
@@ -81,43 +80,40 @@ def build_set(seed: int = 0, third: bool = False) -> list[dict[str, Any]]:
     """The bench's utterances: dicts with ``kind``, ``label`` (yes/no/none, other with ``third``), ``text``,
     ``voice``, ``rate``, ``condition`` and ``pcm`` (16 kHz int16)."""
     rng = np.random.default_rng(seed)
-    engine = espeak.pyttsx3_engine()
+    speaker = engine()
     items: list[dict[str, Any]] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        wav = Path(tmp) / "u.wav"
+    def say(text: str, voice: str, rate: int) -> np.ndarray:
+        speaker.configure(rate_wpm=rate, voice=voice)
+        return to_16k(speaker.synthesise(text), speaker.sample_rate_hz)
 
-        def say(text: str, voice: str, rate: int) -> np.ndarray:
-            x, sr = espeak.synthesise(engine, text, wav, voice, rate)
-            return to_16k(x, sr)
+    def item(kind: str, label: str, text: str, voice: str, rate: int, x: np.ndarray, condition: str = "clean"
+             ) -> dict[str, Any]:
+        return {"kind": kind, "label": label, "text": text, "voice": voice, "rate": rate,
+                "condition": condition, "pcm": x}
 
-        def item(kind: str, label: str, text: str, voice: str, rate: int, x: np.ndarray, condition: str = "clean"
-                 ) -> dict[str, Any]:
-            return {"kind": kind, "label": label, "text": text, "voice": voice, "rate": rate,
-                    "condition": condition, "pcm": x}
+    def add(kind: str, label: str, text: str, voice: str, rate: int, x: np.ndarray) -> None:
+        """Clean, and with white noise."""
+        items.append(item(kind, label, text, voice, rate, x))
+        items.append(item(kind, label, text, voice, rate, _add_noise(x, NOISY_SNR_DB, rng), f"snr{NOISY_SNR_DB:g}dB"))
 
-        def add(kind: str, label: str, text: str, voice: str, rate: int, x: np.ndarray) -> None:
-            """Clean, and with white noise."""
-            items.append(item(kind, label, text, voice, rate, x))
-            items.append(item(kind, label, text, voice, rate, _add_noise(x, NOISY_SNR_DB, rng), f"snr{NOISY_SNR_DB:g}dB"))
-
-        answers = (("yes", YES_PHRASES), ("no", NO_PHRASES)) + ((("other", THIRD_PHRASES),) if third else ())
-        for label, phrases in answers:
-            for text in phrases:
-                for voice in VOICES:
-                    for rate in ANSWER_RATES:
-                        add("answer", label, text, voice, rate, say(text, voice, rate))
-        babble = []
-        for text in OTHER_PHRASES + (THIRD_OTHER_PHRASES if third else ()):
-            for voice in OTHER_VOICES:
-                x = say(text, voice, OTHER_RATE)
-                add("other", "none", text, voice, OTHER_RATE, x)
-                if voice == OTHER_VOICES[0] and len(babble) < 8:
-                    babble.append(x)
-        for text in NEAR_PHRASES:
-            for voice in OTHER_VOICES:
-                items.append(item("near", "none", text, voice, OTHER_RATE, say(text, voice, OTHER_RATE)))
-        for name, x in _noises(rng, babble).items():
-            items.append(item("noise", "none", name, "", 0, x))
+    answers = (("yes", YES_PHRASES), ("no", NO_PHRASES)) + ((("other", THIRD_PHRASES),) if third else ())
+    for label, phrases in answers:
+        for text in phrases:
+            for voice in VOICES:
+                for rate in ANSWER_RATES:
+                    add("answer", label, text, voice, rate, say(text, voice, rate))
+    babble = []
+    for text in OTHER_PHRASES + (THIRD_OTHER_PHRASES if third else ()):
+        for voice in OTHER_VOICES:
+            x = say(text, voice, OTHER_RATE)
+            add("other", "none", text, voice, OTHER_RATE, x)
+            if voice == OTHER_VOICES[0] and len(babble) < 8:
+                babble.append(x)
+    for text in NEAR_PHRASES:
+        for voice in OTHER_VOICES:
+            items.append(item("near", "none", text, voice, OTHER_RATE, say(text, voice, OTHER_RATE)))
+    for name, x in _noises(rng, babble).items():
+        items.append(item("noise", "none", name, "", 0, x))
     return items
 
 

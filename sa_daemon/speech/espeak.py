@@ -1,7 +1,6 @@
-"""Which espeak-ng library speaks, loaded once per process before pyttsx3 looks for one.
+"""Which espeak-ng library speaks, loaded once per process (the engine that speaks with it: ``engine.py``).
 
-pyttsx3's espeak driver opens ``libespeak-ng.so.1`` by name when it is imported. Two libraries can
-answer:
+Two libraries can answer:
 
 * **system**: Debian's ``libespeak-ng1`` (with ``espeak-ng-data``), found by the dynamic loader;
 * **wheel**: the ``espeakng-loader`` wheel, a pip dependency, which ships ``libespeak-ng.so.1``
@@ -9,16 +8,15 @@ answer:
   alone, with no system package.
 
 :func:`load` picks one (``speech.library``: ``auto`` = the system's when present, else the wheel's;
-or ``system`` / ``wheel``), opens it with ``RTLD_GLOBAL`` so that pyttsx3's later ``dlopen`` of the
-same soname gets this one, and for the wheel sets ``ESPEAK_DATA_PATH`` to the wheel's data. A process
-can hold one espeak-ng library only: the first :func:`load` decides, later calls return its result.
+or ``system`` / ``wheel``), opens it with ``RTLD_GLOBAL`` so that any later ``dlopen`` of the same
+soname gets this one, and for the wheel sets ``ESPEAK_DATA_PATH`` to the wheel's data. A process can
+hold one espeak-ng library only: the first :func:`load` decides, later calls return its result.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
-import io
 import logging
 import os
 import threading
@@ -88,7 +86,7 @@ def _wheel() -> EspeakLibrary:
     path = str(Path(espeakng_loader.get_library_path()).with_name(SONAME))
     if not Path(path).exists():
         path = espeakng_loader.get_library_path()
-    os.environ["ESPEAK_DATA_PATH"] = data  # read by espeak_Initialize when pyttsx3 starts the engine
+    os.environ["ESPEAK_DATA_PATH"] = data  # read by espeak_Initialize when the engine starts
     lib = ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
     return EspeakLibrary("wheel", path, _version(lib), data)
 
@@ -122,21 +120,6 @@ def loaded() -> EspeakLibrary | None:
     return _loaded
 
 
-def pyttsx3_engine(library: str = "auto") -> Any:
-    """A pyttsx3 espeak engine on the library :func:`load` chose."""
-    load(library)
-    import pyttsx3
-
-    return pyttsx3.init("espeak")
-
-
-def save_wav(engine: Any, text: str, path: str | Path) -> None:
-    """Synthesise ``text`` to a 16-bit mono WAV at ``path`` (espeak-ng's 22050 Hz) with ``engine``."""
-    with contextlib.redirect_stdout(io.StringIO()):  # pyttsx3 prints "Audio saved to ..."
-        engine.save_to_file(text, str(path))
-        engine.runAndWait()
-
-
 def read_wav(path: str | Path) -> tuple[np.ndarray, int]:
     """A 16-bit PCM WAV as (int16 samples of its first channel, sample rate in Hz)."""
     with wave.open(str(path), "rb") as w:
@@ -145,14 +128,3 @@ def read_wav(path: str | Path) -> tuple[np.ndarray, int]:
         x = np.frombuffer(w.readframes(w.getnframes()), dtype="<i2")
         return x[:: w.getnchannels()].copy(), w.getframerate()
 
-
-def synthesise(engine: Any, text: str, path: str | Path, voice: str | None = None, rate_wpm: int | None = None
-               ) -> tuple[np.ndarray, int]:
-    """Speak ``text`` into the WAV ``path`` with an optional espeak-ng ``voice`` (e.g. ``en-us+f3``)
-    and rate (words per minute); returns what :func:`read_wav` reads back."""
-    if voice is not None:
-        engine.setProperty("voice", voice)
-    if rate_wpm is not None:
-        engine.setProperty("rate", rate_wpm)
-    save_wav(engine, text, path)
-    return read_wav(path)

@@ -1,11 +1,10 @@
-"""Spoken questions: pyttsx3 with espeak-ng, in one dedicated worker thread.
+"""Spoken questions: espeak-ng, in one dedicated worker thread.
 
-pyttsx3 blocks in ``runAndWait`` and must create and run its engine in one thread, so every
-utterance goes through a queue to a single ``sa-speech`` thread; the event loop only enqueues. Each
-utterance is synthesised with ``save_to_file`` to a 16-bit mono 22050 Hz WAV (in ``speech.wav_dir``
-when set, else a temporary file) and played with ``aplay``. Why not ``engine.say``: in pyttsx3 2.99 the
-espeak driver keeps the last ``save_to_file`` path, so a later ``say`` overwrites that file instead of
-playing; and ``aplay`` as a subprocess can be given a timeout.
+Synthesis blocks for a fraction of a second, so every utterance goes through a queue to a single
+``sa-speech`` thread; the event loop only enqueues. Each utterance is synthesised by the process's
+espeak-ng engine (``engine.py``, synchronous: the voice, rate and volume set are the ones spoken) to a
+16-bit mono 22050 Hz WAV (in ``speech.wav_dir`` when set, else a temporary file) and played with
+``aplay``, a subprocess that can be given a timeout.
 
 The espeak-ng library is the system's or the ``espeakng-loader`` wheel's (``espeak.py``), so speech
 needs no system package. What happens to each question is one of :data:`SPEECH_STATES`, decided when
@@ -29,11 +28,12 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..config import SpeechConfig
+from . import engine as espeak_engine
 from . import espeak
 
 log = logging.getLogger(__name__)
@@ -71,8 +71,9 @@ PLAYER_PACKAGE = "alsa-utils"  # the Debian/Ubuntu package that brings aplay
 class Spoken:
     """What happened to one utterance. ``outcome``: ``played``; ``written`` (synthesised, not played:
     playing is off, there is no player, or the player failed, and then ``error`` says why); or
-    ``failed`` (synthesis failed, ``error`` says why). ``wav`` is the file kept in ``speech.wav_dir``
-    (``None`` without one), ``seconds`` the time synthesis and playing took."""
+    ``failed`` (synthesis failed, ``error`` says why). ``error`` also names a voice the engine refused
+    just before this utterance (the previous voice spoke it). ``wav`` is the file kept in
+    ``speech.wav_dir`` (``None`` without one), ``seconds`` the time synthesis and playing took."""
 
     text: str
     outcome: str
@@ -98,11 +99,12 @@ class Speaker:
         engine_factory: EngineFactory | None = None,
         max_pending: int = 4,
     ) -> None:
-        """``engine_factory`` makes the pyttsx3 engine in the speech thread (default: espeak-ng from
-        the library ``speech.library`` selects)."""
+        """``engine_factory`` makes the engine in the speech thread (default: the process's espeak-ng
+        engine on the library ``speech.library`` selects): an object with :class:`~.engine.Engine`'s
+        ``configure(rate_wpm, volume, voice)`` and ``save_wav(text, path)``."""
         self.cfg = cfg
         self.on_done = on_done
-        self._factory = engine_factory or (lambda: espeak.pyttsx3_engine(cfg.library))
+        self._factory = engine_factory or (lambda: espeak_engine.engine(cfg.library))
         self._q: queue.Queue = queue.Queue(maxsize=max_pending)
         self._ready = threading.Event()
         self._available = False
@@ -192,12 +194,19 @@ class Speaker:
             text = self._q.get()
             if text is None:
                 return
+            kept = None
             if self._reconfigured:
                 self._reconfigured = False
-                self._set_voice(engine)
+                try:
+                    self._set_voice(engine)
+                except ValueError as e:  # an unknown voice changes nothing: the previous one speaks on
+                    kept = f"speech.voice: {e}; kept the previous voice"
+                    log.warning("%s", kept)
             self.busy_since = time.monotonic()
             try:
                 spoken = self._speak(engine, text)
+                if kept is not None:
+                    spoken = replace(spoken, error=kept if spoken.error is None else f"{kept}; {spoken.error}")
             except Exception as e:  # noqa: BLE001 - one failed utterance must not end speech
                 spoken = Spoken(text, "failed", None, time.monotonic() - self.busy_since, f"{type(e).__name__}: {e}")
             self.busy_since = None
@@ -207,11 +216,9 @@ class Speaker:
                 log.exception("speech callback failed")
 
     def _set_voice(self, engine: Any) -> None:
-        """The engine speaks at ``cfg``'s rate and volume, with its voice (an espeak-ng name, e.g. en-gb)."""
-        engine.setProperty("rate", self.cfg.rate_wpm)
-        engine.setProperty("volume", self.cfg.volume)
-        if self.cfg.voice:
-            engine.setProperty("voice", self.cfg.voice)
+        """The engine speaks with ``cfg``'s voice (an espeak-ng name, e.g. en-us; ``""``: the default), rate
+        and volume; an unknown voice raises ``ValueError`` and changes nothing."""
+        engine.configure(rate_wpm=self.cfg.rate_wpm, volume=self.cfg.volume, voice=self.cfg.voice)
 
     def _wav_path(self, text: str) -> tuple[Path, bool]:
         self._count += 1
@@ -228,7 +235,7 @@ class Speaker:
         t0 = time.monotonic()
         path, keep = self._wav_path(text)
         try:
-            espeak.save_wav(engine, text, path)
+            engine.save_wav(text, path)
             outcome, err = "written", None
             if self._player_path is not None:
                 try:
