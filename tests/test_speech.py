@@ -120,6 +120,15 @@ def test_real_utterance_becomes_a_non_silent_16_bit_mono_wav(tmp_path):
     assert rms > 500.0, f"silent WAV (RMS {rms:.1f} of 32767)"
 
 
+def test_an_unknown_voice_at_start_is_unavailable_speech_naming_the_key():
+    sp = Speaker(SpeechConfig(voice="xx-no-such-voice", play=False), engine_factory=FakeEngine)
+    try:
+        assert sp.wait_ready(5.0) is False and sp.mode == "unavailable"
+        assert sp.error.startswith("speech unavailable: ValueError: speech.voice: ") and "xx-no-such-voice" in sp.error
+    finally:
+        sp.close(timeout_s=2.0)
+
+
 def test_no_engine_means_unavailable_and_say_returns_false():
     def broken():
         raise RuntimeError("no espeak here")

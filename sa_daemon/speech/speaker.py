@@ -200,7 +200,7 @@ class Speaker:
                 try:
                     self._set_voice(engine)
                 except ValueError as e:  # an unknown voice changes nothing: the previous one speaks on
-                    kept = f"speech.voice: {e}; kept the previous voice"
+                    kept = f"{e}; kept the previous voice"
                     log.warning("%s", kept)
             self.busy_since = time.monotonic()
             try:
@@ -218,7 +218,10 @@ class Speaker:
     def _set_voice(self, engine: Any) -> None:
         """The engine speaks with ``cfg``'s voice (an espeak-ng name, e.g. en-us; ``""``: the default), rate
         and volume; an unknown voice raises ``ValueError`` and changes nothing."""
-        engine.configure(rate_wpm=self.cfg.rate_wpm, volume=self.cfg.volume, voice=self.cfg.voice)
+        try:
+            engine.configure(rate_wpm=self.cfg.rate_wpm, volume=self.cfg.volume, voice=self.cfg.voice)
+        except ValueError as e:
+            raise ValueError(f"speech.voice: {e}") from None
 
     def _wav_path(self, text: str) -> tuple[Path, bool]:
         self._count += 1
