@@ -4,7 +4,8 @@ espeak-ng's state is global to the library, so a process has one :class:`Engine`
 the library :func:`.espeak.load` chose. It runs espeak-ng with ``AUDIO_OUTPUT_SYNCHRONOUS``: ``Synth``
 returns once the whole utterance has gone through the callback, in the calling thread, so a voice, rate
 or volume set before an utterance is the one it is spoken with, and the same text with the same
-settings gives the same samples in every process.
+settings has the same timing in every process (the same samples with Debian's espeak-ng 1.51; the
+wheel's 1.52 varies the noise of breathy variants such as ``+f2`` from process to process).
 
 Why not pyttsx3 (sessions 1-23): its espeak driver starts espeak-ng in ``AUDIO_OUTPUT_RETRIEVAL``,
 espeak-ng's asynchronous mode, where ``SetParameter`` is queued to espeak-ng's own thread while
