@@ -330,7 +330,8 @@ class Controller:
         cap = self._cfg.asking.max_per_task
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
                         self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
-                        questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor)
+                        questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor,
+                        pose_log_w=b.pose_log_w)
         self._issued[snap] = self._task
         return snap
 
@@ -440,11 +441,13 @@ class Controller:
         u = self.user_twist if fresh else ZERO6.copy()
         action = self._carried_action(t, state.pose)
         error = None
+        b = self._belief
         try:
-            cmd = self._model.command(action, self._belief.goals, self._belief.probs, state.pose, u, self._method)
+            reach = self._model.reach_poses(b.goals, state.pose, b.pose_log_w)
+            cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             self._yield = self._yield_reason(t, state.pose, cmd, fresh and bool(np.any(u)))
             if self._yield is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
-                cmd = self._model.command(NO_ASSIST, self._belief.goals, self._belief.probs, state.pose, u, self._method)
+                cmd = self._model.command(NO_ASSIST, b.goals, b.probs, state.pose, u, self._method)
         except (ValueError, FloatingPointError) as e:
             cmd, error = Command(NO_ASSIST, ZERO6.copy(), u, False), str(e)
         result = self._safety.filter(

@@ -73,8 +73,9 @@ class Belief:
     confirmed: str | None = None
     ruled_out: frozenset[str] = frozenset()
     pose_log_w: FloatArray | None = None
-    """``intent.poses = "tracked"``: each goal's posterior over its own grasp poses, ``(G, K)`` log-weights
-    normalised per goal (``-inf`` on padding); ``None``: uniform over its poses."""
+    """``intent.poses = "tracked"`` or ``intent.reach_pose = "tracked"``: each goal's posterior over its own
+    grasp poses from the input since the last resampling, ``(G, K)`` log-weights normalised per goal
+    (``-inf`` on padding); ``None``: uniform over its poses."""
     anchor: FloatArray | None = None
     """Where the user last drove the gripper (m, base frame): its position at the last input sample that
     translated (``None``: no input yet). A turn's charge (``intent.turn_charge``) is measured from here, not
@@ -127,7 +128,7 @@ class Belief:
                       self.anchor if anchor is None else anchor)
 
     def pose_weights(self) -> FloatArray:
-        """Each goal's log-weights over its grasp poses for ``intent.poses = "tracked"``, ``(G, K)``."""
+        """Each goal's log-weights over its grasp poses from the input so far, ``(G, K)`` (:attr:`pose_log_w`)."""
         if self.pose_log_w is not None:
             return self.pose_log_w
         mask = self.goals.pose_mask
@@ -156,7 +157,8 @@ class Belief:
         rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``);
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
-        its lowest-value one alone (``intent.poses``).
+        its lowest-value one alone (``intent.poses``). The pose posterior is kept whenever ``poses`` or
+        ``reach_pose`` is ``tracked``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -166,17 +168,20 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
+        if cfg.poses == "tracked" or cfg.reach_pose == "tracked":
+            # Bayes over each goal's poses, from uniform, along the whole input
+            per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
+            log_w = self.pose_weights()
+            tracked_nll = mixture_nll(log_w, per)
+            pose_log_w = log_w - per + tracked_nll[:, None]  # normalised per goal: sum_k w_k e^-per_k = e^-nll
+            pose_log_w.setflags(write=False)
         if cfg.poses == "nearest":
             nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, positions, quats, cfg,
                                               cfg.rotation_scale, anchor)
         elif cfg.poses == "marginal":
             nll = marginal_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor)
-        else:  # tracked: Bayes over each goal's poses, from uniform, along the whole input
-            per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
-            log_w = self.pose_weights()
-            nll = mixture_nll(log_w, per)
-            pose_log_w = log_w - per + nll[:, None]  # normalised per goal: sum_k w_k exp(-per_k) = exp(-nll)
-            pose_log_w.setflags(write=False)
+        else:
+            nll = tracked_nll
         free = self._competing()
         if free is None:
             return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w, anchor=anchor)

@@ -20,6 +20,7 @@ from ..geometry import FloatArray, Pose, quat_angle
 from ..world.goalset import GoalSet
 from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
+from .huber import tracked_goal_poses
 from .methods import MethodSpec, method_spec
 from .reward import opposes
 from .twists import blend, ho_robot_twist, move_twist
@@ -143,18 +144,35 @@ class SharedAutonomyModel:
 
     # -- velocity commands ---------------------------------------------------------------------------------
 
+    def reach_poses(self, goals: GoalSet, pose: Pose,
+                    pose_log_w: FloatArray | None = None) -> tuple[FloatArray, FloatArray] | None:
+        """The grasp pose each goal is driven to and scored at, ``((G, 3), (G, 4))``, when
+        ``intent.reach_pose = "tracked"``: the pose the input since the last resampling points at
+        (:func:`~.huber.tracked_goal_poses`; ``pose_log_w`` the belief's :attr:`~.belief.Belief.pose_log_w`,
+        ``None``: no input yet). ``None`` with ``"closest"``: the moves and the planner's rollouts take
+        ``k_c`` (:meth:`GoalSet.desired_poses`) and HO each goal's lowest-value pose, as they always have."""
+        if self.cfg.intent.reach_pose != "tracked":
+            return None
+        if pose_log_w is None:
+            with np.errstate(divide="ignore"):
+                pose_log_w = np.log(goals.pose_mask.astype(float))
+        return tracked_goal_poses(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
+                                  self.cfg.intent)
+
     def robot_twist(
-        self, action: Action, goals: GoalSet, probs: FloatArray, pose: Pose, user_twist: FloatArray
+        self, action: Action, goals: GoalSet, probs: FloatArray, pose: Pose, user_twist: FloatArray,
+        reach: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray:
-        """The robot's twist ``a_r`` (m/s, rad/s) for ``action`` at ``pose``."""
+        """The robot's twist ``a_r`` (m/s, rad/s) for ``action`` at ``pose``; ``reach``: the goals' poses from
+        :meth:`reach_poses` (``None``: ``k_c`` for a move, the lowest-value poses for HO)."""
         if action.kind is ActionKind.MOVE:
             if action.goal is None or not 0 <= action.goal < len(goals):
                 raise ValueError(f"move action needs a goal index in range, got {action.goal}")
-            kp, kq = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+            kp, kq = reach or goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
             return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
         if action.kind is ActionKind.HO:
-            return ho_robot_twist(pose.position, pose.quat_wxyz, user_twist, goals.positions, goals.quats_wxyz,
-                                  np.asarray(probs), self.cfg)
+            gp, gq = reach or (goals.positions, goals.quats_wxyz)
+            return ho_robot_twist(pose.position, pose.quat_wxyz, user_twist, gp, gq, np.asarray(probs), self.cfg)
         return ZERO_TWIST.copy()
 
     def command(
@@ -165,18 +183,19 @@ class SharedAutonomyModel:
         pose: Pose,
         user_twist: FloatArray,
         method: str = "policy",
+        reach: tuple[FloatArray, FloatArray] | None = None,
     ) -> Command:
         """Blend ``action``'s robot twist with the user's twist (current mode only).
 
         No-assist passes the user's twist unscaled; a question holds the robot still; ``ho+noassist``
-        falls back to no-assist whenever HO opposes the user.
+        falls back to no-assist whenever HO opposes the user. ``reach`` as in :meth:`robot_twist`.
         """
         u = np.asarray(user_twist, dtype=float)
         if action.kind is ActionKind.QUESTION:
             return Command(action, ZERO_TWIST.copy(), ZERO_TWIST.copy(), False)
         if action.kind is ActionKind.NONE:
             return Command(action, ZERO_TWIST.copy(), u.copy(), False)
-        r = self.robot_twist(action, goals, probs, pose, u)
+        r = self.robot_twist(action, goals, probs, pose, u, reach)
         opposed = bool(opposes(u, r, self.cfg.reward.opposition_threshold))
         if opposed and method == "ho+noassist":
             return Command(NO_ASSIST, ZERO_TWIST.copy(), u.copy(), False)

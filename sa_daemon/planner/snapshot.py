@@ -13,6 +13,12 @@ from ..world.goals import Goal
 from ..world.goalset import GoalSet
 
 
+def _log(w: FloatArray) -> FloatArray:
+    """``log w`` with ``log 0 = -inf`` (a padded grasp pose), without numpy's warning."""
+    with np.errstate(divide="ignore"):
+        return np.log(w)
+
+
 @dataclass(frozen=True, eq=False)
 class Snapshot:
     """Everything the planner needs, frozen at one instant.
@@ -26,6 +32,9 @@ class Snapshot:
     ``asking.max_per_task``; ``None``: no cap, 0: no question). ``anchor``: where the user last
     translated (m, base frame; :attr:`~..model.belief.Belief.anchor`), from which the watch model's
     tracker measures a turn's charge (``None``: at ``pose``, as a belief that has seen no input).
+    ``pose_log_w``: each goal's posterior over its grasp poses, ``(G, K)`` log-weights
+    (:attr:`~..model.belief.Belief.pose_log_w`; ``None``: uniform), from which the goals' poses are
+    taken under ``intent.reach_pose = "tracked"``.
     """
 
     goals: GoalSet
@@ -40,6 +49,7 @@ class Snapshot:
     user_speed: tuple[float, float] | None = None
     questions_left: int | None = None
     anchor: FloatArray | None = None
+    pose_log_w: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.goals, GoalSet):
@@ -65,6 +75,13 @@ class Snapshot:
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise ValueError("anchor must be None or 3 finite numbers (m)")
         object.__setattr__(self, "anchor", a)
+        if self.pose_log_w is not None:
+            w = np.array(self.pose_log_w, dtype=float)
+            mask = self.goals.pose_mask
+            if w.shape != mask.shape or np.isnan(w).any() or np.any(w[mask] == np.inf) or np.any(w[mask] == -np.inf):
+                raise ValueError("pose_log_w must be None or (G, K) log-weights, finite on every grasp pose")
+            w[~mask] = -np.inf
+            object.__setattr__(self, "pose_log_w", w)
         if self.questions_left is not None and (not isinstance(self.questions_left, int) or self.questions_left < 0):
             raise ValueError("questions_left must be None or an integer >= 0")
 
@@ -83,6 +100,7 @@ class Snapshot:
             "user_speed": list(self.user_speed),
             "questions_left": self.questions_left,
             "anchor": self.anchor.tolist(),
+            "pose_weights": None if self.pose_log_w is None else np.exp(self.pose_log_w).tolist(),
         }
 
     @classmethod
@@ -100,6 +118,7 @@ class Snapshot:
             user_speed=d.get("user_speed"),
             questions_left=d.get("questions_left"),
             anchor=d.get("anchor"),
+            pose_log_w=None if d.get("pose_weights") is None else _log(np.asarray(d["pose_weights"], dtype=float)),
         )
 
 

@@ -109,7 +109,8 @@ class WatchSearch:
         self.snap, self.deadline, self.node_budget = snap, deadline, node_budget
         goals = snap.goals
         self.b0 = snap.probs
-        self.kp, self.kq = goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad)
+        self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
+                            or goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad))
         self.pregrasp = pregrasp_points(self.kp, self.kq, cfg.intent.user_standoff_m)
         cands = model.candidate_goals(goals, self.b0, snap.pose, (self.kp, self.kq))
         self.moves, self.questions = model.actions_for(snap.method, goals, cands, snap.asked)
