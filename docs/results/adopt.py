@@ -1,0 +1,147 @@
+"""Session 19's rule for adopting a model or tracker option as the default, checked on suite files.
+
+    python docs/results/adopt.py TAG [--dir DIR] [--default marginal]
+
+reads ``DIR/suite-{table1,study-simple,fig7}-TAG.json`` (the option's runs, ``DIR`` defaults to this folder)
+and ``docs/results/suite-{...}-marginal.json`` (the default's), paired by (scene, task, method, user), and
+prints the verdict of the rule written down before session 19's run (``docs/model.md``, "A goal's grasps
+read together"): adopt if, on Table I, the simple study and Fig. 7, HO and policy,
+
+(a) the policy's correct prediction rises on Scene 2 and falls below 0.9 on no task that was at or above it;
+(b) no (task, method) loses more than 2 successes;
+(c) for each method, the (task, user) cells whose mean completion time (s, successful trials) rises by more
+    than 5 % are no more than those whose mean time falls by more than 5 %.
+
+Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
+mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from report import verdicts
+
+HERE = Path(__file__).resolve().parent
+RULE_SUITES = ("table1", "study-simple", "fig7")
+ALL_SUITES = (*RULE_SUITES, "study-complex")
+MAX_LOST = 2          # (b): successes a (task, method) may lose
+PREDICTION = 0.9      # (a): the prediction floor
+CELL_CHANGE = 0.05    # (c): a cell is faster / slower beyond this fraction of its old time
+
+
+def _mean(xs: list) -> float | None:
+    xs = [x for x in xs if x is not None]
+    return sum(xs) / len(xs) if xs else None
+
+
+def task_rows(new: dict, old: dict) -> list[dict]:
+    """Per (scene, task, method): successes, mean time of the successful trials (s), the correct-prediction
+    rate and questions a task, each as ``(old, new)``."""
+    def group(d: dict) -> dict:
+        out: dict = {}
+        for t in d["trials"]:
+            out.setdefault((t["scene"], t["task"], t["method"]), []).append(t)
+        return out
+    gn, go = group(new), group(old)
+    rows = []
+    for key, tn in gn.items():
+        to = go.get(key, [])
+        pair = {}
+        for name, f in (("successes", lambda ts: sum(t["success"] for t in ts)),
+                        ("time_s", lambda ts: _mean([t["completion_time_s"] for t in ts if t["success"]])),
+                        ("prediction", lambda ts: _mean([t["correct_prediction"] for t in ts])),
+                        ("questions", lambda ts: _mean([t["questions"] for t in ts]))):
+            pair[name] = (f(to), f(tn))
+        rows.append({"scene": key[0], "task": key[1], "method": key[2], **pair})
+    return rows
+
+
+def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
+    """Per method, ``[faster, slower]``: the (task, user) cells whose mean time moved by more than
+    ``CELL_CHANGE`` of the default's."""
+    before = {(r["scene"], r["task"], r["method"], r["user"]): r["completion_time_s"] for r in old["summary"]}
+    out: dict[str, list[int]] = {}
+    for r in new["summary"]:
+        o = before.get((r["scene"], r["task"], r["method"], r["user"]))
+        n = r["completion_time_s"]
+        counts = out.setdefault(r["method"], [0, 0])
+        if o is None or n is None or o == 0:
+            continue
+        counts[0] += n < (1 - CELL_CHANGE) * o
+        counts[1] += n > (1 + CELL_CHANGE) * o
+    return out
+
+
+def judge(rows: list[dict], cells: dict[str, list[int]]) -> list[str]:
+    """The rule's failures, one line each (an empty list: adopt)."""
+    fails = []
+    for r in rows:
+        (so, sn), (po, pn) = r["successes"], r["prediction"]
+        if sn < so - MAX_LOST:
+            fails.append(f"(b) {r['task']} {r['method']}: {so} -> {sn} successes")
+        if r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
+            fails.append(f"(a) {r['task']}: prediction {po:.2f} -> {pn:.2f}")
+    scene2 = [r for r in rows if r["scene"] == "scene2" and r["method"] == "policy"]
+    if scene2:
+        po = _mean([r["prediction"][0] for r in scene2])
+        pn = _mean([r["prediction"][1] for r in scene2])
+        if pn <= po:
+            fails.append(f"(a) Scene 2's prediction does not rise: {po:.3f} -> {pn:.3f}")
+    for method, (faster, slower) in cells.items():
+        if slower > faster:
+            fails.append(f"(c) {method}: {slower} cells slower, {faster} faster")
+    return fails
+
+
+def _f(x: float | None, digits: int) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("tag")
+    ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
+    ap.add_argument("--default", default="marginal", help="the default's file tag")
+    args = ap.parse_args(argv)
+    judged_rows: list[dict] = []
+    judged_cells: dict[str, list[int]] = {}
+    lines = ["| suite | task | method | successes | time s | prediction | questions |", "|" + "---|" * 7]
+    for suite in ALL_SUITES:
+        path = args.dir / f"suite-{suite}-{args.tag}.json"
+        if not path.exists():
+            continue
+        new = json.loads(path.read_text())
+        old = json.loads((HERE / f"suite-{suite}-{args.default}.json").read_text())
+        rows, cells = task_rows(new, old), cell_changes(new, old)
+        for r in rows:
+            lines.append(f"| {suite} | `{r['task']}` | {r['method']} | {r['successes'][0]} -> {r['successes'][1]} | "
+                         f"{_f(r['time_s'][0], 1)} -> {_f(r['time_s'][1], 1)} | "
+                         f"{_f(r['prediction'][0], 2)} -> {_f(r['prediction'][1], 2)} | "
+                         f"{_f(r['questions'][0], 2)} -> {_f(r['questions'][1], 2)} |")
+        print(f"{suite}: cells more than {CELL_CHANGE:.0%} faster / slower "
+              + ", ".join(f"{m} {f} / {s}" for m, (f, s) in cells.items()))
+        print("policy against HO, the option then the default:")
+        print("\n".join(v for v in verdicts(new["comparisons"]) + verdicts(old["comparisons"]) if "| ho |" in v))
+        if suite in RULE_SUITES:
+            judged_rows += rows
+            for m, (f, s) in cells.items():
+                judged_cells.setdefault(m, [0, 0])
+                judged_cells[m][0] += f
+                judged_cells[m][1] += s
+    if not judged_rows:
+        print(f"no suite-*-{args.tag}.json of {', '.join(RULE_SUITES)} in {args.dir}", file=sys.stderr)
+        return 2
+    print("\n" + "\n".join(lines) + "\n")
+    fails = judge(judged_rows, judged_cells)
+    print("Session 19's rule: " + ("adopt" if not fails else "off"))
+    for f in fails:
+        print("  " + f)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,72 @@
+"""Session 19's adoption rule as ``docs/results/adopt.py`` checks it, on small synthetic suites."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+
+
+@pytest.fixture(scope="module")
+def adopt():
+    sys.path.insert(0, str(RESULTS))  # adopt.py imports report.py beside it, as when run as a script
+    try:
+        spec = importlib.util.spec_from_file_location("adopt", RESULTS / "adopt.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        yield mod
+    finally:
+        sys.path.remove(str(RESULTS))
+
+
+def _suite(cells: dict[tuple[str, str, str, str], tuple[int, float, float]], n: int = 10) -> dict:
+    """A suite file's trials and summary: per (scene, task, method, user), ``(successes of n, time s,
+    correct-prediction rate)``."""
+    trials, summary = [], []
+    for (scene, task, method, user), (ok, time_s, pred) in cells.items():
+        for seed in range(n):
+            trials.append({"scene": scene, "task": task, "method": method, "user": user, "seed": seed,
+                           "success": seed < ok, "completion_time_s": time_s if seed < ok else 100.0,
+                           "correct_prediction": seed < round(pred * n), "questions": 0})
+        summary.append({"scene": scene, "task": task, "method": method, "user": user,
+                        "completion_time_s": time_s if ok else None})
+    return {"trials": trials, "summary": summary, "comparisons": []}
+
+
+def _verdict(adopt, old: dict, new: dict) -> list[str]:
+    return adopt.judge(adopt.task_rows(_suite(new), _suite(old)), adopt.cell_changes(_suite(new), _suite(old)))
+
+
+BASE = {("scene2", "drill", "policy", "u1"): (10, 20.0, 0.5),
+        ("scene2", "drill", "ho", "u1"): (10, 30.0, 0.5),
+        ("scene1", "cup", "policy", "u1"): (10, 10.0, 0.9)}
+
+
+def test_a_better_option_is_adopted(adopt):
+    better = {**BASE, ("scene2", "drill", "policy", "u1"): (10, 18.0, 0.8)}
+    assert _verdict(adopt, BASE, better) == []
+
+
+def test_two_lost_successes_pass_and_three_fail(adopt):
+    up = {**BASE, ("scene2", "drill", "policy", "u1"): (10, 20.0, 0.8)}
+    assert _verdict(adopt, BASE, {**up, ("scene2", "drill", "ho", "u1"): (8, 30.0, 0.5)}) == []
+    fails = _verdict(adopt, BASE, {**up, ("scene2", "drill", "ho", "u1"): (7, 30.0, 0.5)})
+    assert fails == ["(b) drill ho: 10 -> 7 successes"]
+
+
+def test_prediction_crossing_the_floor_or_not_rising_on_scene2_fails(adopt):
+    fails = _verdict(adopt, BASE, {**BASE, ("scene1", "cup", "policy", "u1"): (10, 10.0, 0.8)})
+    assert "(a) cup: prediction 0.90 -> 0.80" in fails
+    assert any(f.startswith("(a) Scene 2's prediction does not rise") for f in fails)
+
+
+def test_more_slower_cells_than_faster_fails(adopt):
+    up = {**BASE, ("scene2", "drill", "policy", "u1"): (10, 20.0, 0.8)}
+    slower = {**up, ("scene1", "cup", "policy", "u1"): (10, 10.6, 0.9)}
+    assert _verdict(adopt, BASE, slower) == ["(c) policy: 1 cells slower, 0 faster"]
+    within = {**up, ("scene1", "cup", "policy", "u1"): (10, 10.4, 0.9)}
+    assert _verdict(adopt, BASE, within) == []
