@@ -24,14 +24,15 @@ def adopt():
 
 
 def _suite(cells: dict[tuple[str, str, str, str], tuple[int, float, float]], n: int = 10) -> dict:
-    """A suite file's trials and summary: per (scene, task, method, user), ``(successes of n, time s,
-    correct-prediction rate)``."""
+    """A suite file's trials (the fields ``sim.evaluate.summarise`` reads) and summary: per (scene, task,
+    method, user), ``(successes of n, time s, correct-prediction rate)``."""
     trials, summary = [], []
     for (scene, task, method, user), (ok, time_s, pred) in cells.items():
         for seed in range(n):
             trials.append({"scene": scene, "task": task, "method": method, "user": user, "seed": seed,
                            "success": seed < ok, "completion_time_s": time_s if seed < ok else 100.0,
-                           "correct_prediction": seed < round(pred * n), "questions": 0})
+                           "correct_prediction": seed < round(pred * n), "questions": 0,
+                           "mode_changes": 1, "joystick_input": 50.0, "opposing_pct": 0.0})
         summary.append({"scene": scene, "task": task, "method": method, "user": user,
                         "completion_time_s": time_s if ok else None})
     return {"trials": trials, "summary": summary, "comparisons": []}
