@@ -85,12 +85,13 @@ class IntentConfig(_Section):
         "nearer of its grasp and its pre-grasp point: time spent turning is not spent approaching; 0 = the "
         "paper's MaxEnt IOC, the default (measured in sessions 22-23 and left off; docs/model.md, The tracker)",
     )
-    reach_pose: Literal["closest", "tracked"] = Field(
+    reach_pose: Literal["closest", "tracked", "tracked_moves"] = Field(
         "closest",
         description="the grasp pose a goal is driven to and scored at: closest = the paper's k_c for the moves and "
         "the planner's rollouts (closest by distance) and each goal's lowest-value pose for HO; tracked = for all "
         "of them the pose the input since the last resampling points at (each goal's posterior over its poses "
-        "times exp(-V) at the gripper; docs/model.md, One grasp pose for the tracker, HO, moves and rollouts)",
+        "times exp(-V) at the gripper; docs/model.md, One grasp pose for HO, the moves and the rollouts); "
+        "tracked_moves = that pose for the moves and the rollouts, HO keeping the paper's lowest-value poses",
     )
     copy_weights: Literal["equal", "poses"] = Field(
         "equal",

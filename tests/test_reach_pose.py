@@ -2,7 +2,8 @@
 
 ``closest`` (the default) keeps the paper's ``k_c`` for the moves and the rollouts and each goal's
 lowest-value pose for HO; ``tracked`` takes, for all of them, the pose the input since the last
-resampling points at: each goal's posterior over its poses times ``exp(-V)`` at the gripper.
+resampling points at: each goal's posterior over its poses times ``exp(-V)`` at the gripper;
+``tracked_moves`` takes it for the moves and the rollouts and leaves HO the paper's.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from sa_daemon.world.goalset import GoalSet
 TOP = (math.pi, 0.0, 0.0)
 CLOSEST = Config()
 TRACKED = config_from_dict({"intent": {"reach_pose": "tracked"}})
+MOVES = config_from_dict({"intent": {"reach_pose": "tracked_moves"}})
 # The gripper 1 cm toward the cup's -y grasp: that grasp is the closer and the lower-value one.
 GRIPPER = Pose.from_rpy([0.30, -0.01, 0.20], TOP)
 MINUS_Y, PLUS_Y = [0.40, -0.05, 0.20], [0.40, 0.05, 0.20]
@@ -92,16 +94,17 @@ def test_with_no_input_the_tracked_pose_of_one_orientation_is_the_lowest_value_p
 
 def test_ho_and_a_move_head_for_the_grasp_the_input_pointed_at():
     """The gripper nearer the cup's -y grasp, the input so far at its +y grasp: under ``closest`` HO and the
-    move to the cup pull toward -y, under ``tracked`` toward +y."""
+    move to the cup pull toward -y, under ``tracked`` toward +y; under ``tracked_moves`` the move toward +y
+    and HO toward -y, as the paper's."""
     b = driven(TRACKED)
     move = Action(ActionKind.MOVE, 0, "cup:top")
-    for cfg, sign in ((CLOSEST, -1.0), (TRACKED, 1.0)):
+    for cfg, ho_sign, move_sign in ((CLOSEST, -1.0, -1.0), (TRACKED, 1.0, 1.0), (MOVES, -1.0, 1.0)):
         model = SharedAutonomyModel(cfg)
         reach = model.reach_poses(b.goals, GRIPPER, b.pose_log_w)
         cup_only = np.array([1.0, 0.0])
         ho = model.robot_twist(HO_ACTION, b.goals, cup_only, GRIPPER, np.zeros(6), reach)
         mv = model.robot_twist(move, b.goals, b.probs, GRIPPER, np.zeros(6), reach)
-        assert sign * ho[1] > 0.0 and sign * mv[1] > 0.0
+        assert ho_sign * ho[1] > 0.0 and move_sign * mv[1] > 0.0
     kp, _ = SharedAutonomyModel(TRACKED).reach_poses(b.goals, GRIPPER, b.pose_log_w)
     np.testing.assert_allclose(kp[0], PLUS_Y)
 
@@ -118,7 +121,7 @@ def test_snapshot_carries_the_pose_posterior_and_refuses_a_malformed_one():
             Snapshot(b.goals, b.probs, GRIPPER, AT_PLUS_Y, pose_log_w=bad)
 
 
-@pytest.mark.parametrize("cfg", [CLOSEST, TRACKED], ids=["closest", "tracked"])
+@pytest.mark.parametrize("cfg", [CLOSEST, TRACKED, MOVES], ids=["closest", "tracked", "tracked_moves"])
 def test_the_planner_scores_the_goals_at_the_pose_the_controller_drives_to(cfg):
     """The watch model's rollouts take each goal's pose from the same place as the arm's commands."""
     model = SharedAutonomyModel(cfg)
@@ -129,26 +132,41 @@ def test_the_planner_scores_the_goals_at_the_pose_the_controller_drives_to(cfg):
     want = reach or b.goals.desired_poses(GRIPPER, cfg.intent.rotation_weight_m_per_rad)
     np.testing.assert_array_equal(search.kp, want[0])
     np.testing.assert_array_equal(search.kq, want[1])
-    assert np.allclose(search.kp[0], PLUS_Y if cfg is TRACKED else MINUS_Y)
+    assert np.allclose(search.kp[0], MINUS_Y if cfg is CLOSEST else PLUS_Y)
     assert Solver(model).plan(snap).action is not None
+
+
+def ho_tick(cfg: Config):
+    """The controller's HO tick after 40 input samples at the cup's +y grasp, and its belief."""
+    ctl = Controller(cfg, cup_and_bowl(), "ho", 0.025)
+    ctl.adopt_fixed()
+    t = 0.0
+    axes = AT_PLUS_Y[:3] / cfg.input.linear_scale_mps
+    for _ in range(40):
+        ctl.on_input(axes, t)
+        ctl.update_belief(GRIPPER, t)
+        t += 0.025
+    return ctl.tick(ArmState(GRIPPER, False), t), ctl
 
 
 def test_the_controller_sends_ho_to_the_tracked_pose():
     """In the daemon's and the evaluation's control core: HO's tick toward the belief's tracked poses."""
     model = SharedAutonomyModel(TRACKED)
-    ctl = Controller(TRACKED, cup_and_bowl(), "ho", 0.025)
-    ctl.adopt_fixed()
-    t = 0.0
-    axes = AT_PLUS_Y[:3] / TRACKED.input.linear_scale_mps
-    for _ in range(40):
-        ctl.on_input(axes, t)
-        ctl.update_belief(GRIPPER, t)
-        t += 0.025
+    tick, ctl = ho_tick(TRACKED)
     b = ctl.belief
     assert np.exp(b.pose_log_w[0, 1]) > 0.99
-    tick = ctl.tick(ArmState(GRIPPER, False), t)
     want = model.command(HO_ACTION, b.goals, b.probs, GRIPPER, ctl.user_twist, "ho",
                          model.reach_poses(b.goals, GRIPPER, b.pose_log_w))
     np.testing.assert_allclose(tick.command.robot_twist, want.robot_twist, atol=1e-12)
     closest = model.command(HO_ACTION, b.goals, b.probs, GRIPPER, ctl.user_twist, "ho")
     assert not np.allclose(tick.command.robot_twist, closest.robot_twist)
+
+
+def test_tracked_moves_leaves_the_ho_method_as_the_paper_has_it():
+    """Under ``tracked_moves`` the HO method's tick is the default's, bit for bit, though the belief keeps
+    the pose posterior: the HO baseline the option is compared with does not move."""
+    moves, plain = ho_tick(MOVES), ho_tick(CLOSEST)
+    assert moves[1].belief.pose_log_w is not None and plain[1].belief.pose_log_w is None
+    np.testing.assert_array_equal(moves[1].belief.log_p, plain[1].belief.log_p)
+    np.testing.assert_array_equal(moves[0].command.robot_twist, plain[0].command.robot_twist)
+    np.testing.assert_array_equal(moves[0].safety.twist, plain[0].safety.twist)

@@ -73,7 +73,7 @@ class Belief:
     confirmed: str | None = None
     ruled_out: frozenset[str] = frozenset()
     pose_log_w: FloatArray | None = None
-    """``intent.poses = "tracked"`` or ``intent.reach_pose = "tracked"``: each goal's posterior over its own
+    """``intent.poses = "tracked"`` or ``intent.reach_pose`` not ``"closest"``: each goal's posterior over its own
     grasp poses from the input since the last resampling, ``(G, K)`` log-weights normalised per goal
     (``-inf`` on padding); ``None``: uniform over its poses."""
     anchor: FloatArray | None = None
@@ -158,7 +158,7 @@ class Belief:
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
         its lowest-value one alone (``intent.poses``). The pose posterior is kept whenever ``poses`` or
-        ``reach_pose`` is ``tracked``.
+        ``reach_pose`` is not ``closest``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -168,7 +168,7 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
-        if cfg.poses == "tracked" or cfg.reach_pose == "tracked":
+        if cfg.poses == "tracked" or cfg.reach_pose != "closest":
             # Bayes over each goal's poses, from uniform, along the whole input
             per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()

@@ -147,11 +147,12 @@ class SharedAutonomyModel:
     def reach_poses(self, goals: GoalSet, pose: Pose,
                     pose_log_w: FloatArray | None = None) -> tuple[FloatArray, FloatArray] | None:
         """The grasp pose each goal is driven to and scored at, ``((G, 3), (G, 4))``, when
-        ``intent.reach_pose = "tracked"``: the pose the input since the last resampling points at
-        (:func:`~.huber.tracked_goal_poses`; ``pose_log_w`` the belief's :attr:`~.belief.Belief.pose_log_w`,
-        ``None``: no input yet). ``None`` with ``"closest"``: the moves and the planner's rollouts take
-        ``k_c`` (:meth:`GoalSet.desired_poses`) and HO each goal's lowest-value pose, as they always have."""
-        if self.cfg.intent.reach_pose != "tracked":
+        ``intent.reach_pose`` is ``"tracked"`` or ``"tracked_moves"``: the pose the input since the last
+        resampling points at (:func:`~.huber.tracked_goal_poses`; ``pose_log_w`` the belief's
+        :attr:`~.belief.Belief.pose_log_w`, ``None``: no input yet). ``None`` with ``"closest"``: the moves and
+        the planner's rollouts take ``k_c`` (:meth:`GoalSet.desired_poses`) and HO each goal's lowest-value
+        pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives these to a move only.)"""
+        if self.cfg.intent.reach_pose == "closest":
             return None
         if pose_log_w is None:
             with np.errstate(divide="ignore"):
@@ -164,13 +165,16 @@ class SharedAutonomyModel:
         reach: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray:
         """The robot's twist ``a_r`` (m/s, rad/s) for ``action`` at ``pose``; ``reach``: the goals' poses from
-        :meth:`reach_poses` (``None``: ``k_c`` for a move, the lowest-value poses for HO)."""
+        :meth:`reach_poses` (``None``: ``k_c`` for a move, the lowest-value poses for HO; HO ignores them
+        under ``intent.reach_pose = "tracked_moves"``)."""
         if action.kind is ActionKind.MOVE:
             if action.goal is None or not 0 <= action.goal < len(goals):
                 raise ValueError(f"move action needs a goal index in range, got {action.goal}")
             kp, kq = reach or goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
             return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
         if action.kind is ActionKind.HO:
+            if self.cfg.intent.reach_pose == "tracked_moves":
+                reach = None
             gp, gq = reach or (goals.positions, goals.quats_wxyz)
             return ho_robot_twist(pose.position, pose.quat_wxyz, user_twist, gp, gq, np.asarray(probs), self.cfg)
         return ZERO_TWIST.copy()
