@@ -177,6 +177,15 @@ def rpy_to_quat(rpy: ArrayLike) -> FloatArray:
     return quat_mul(qz, quat_mul(qy, qx))
 
 
+def as_twist(twist: ArrayLike) -> FloatArray:
+    """``twist`` as a float array of shape ``(6,)`` (linear m/s, angular rad/s); ``ValueError`` unless it is
+    6 finite numbers: the one check every consumer of a commanded twist makes."""
+    t = np.array(twist, dtype=float)
+    if t.shape != (6,) or not np.all(np.isfinite(t)):
+        raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
+    return t
+
+
 def integrate_pose(
     position: ArrayLike, quat_wxyz: ArrayLike, twist: ArrayLike, dt: float
 ) -> tuple[FloatArray, FloatArray]:
@@ -245,10 +254,7 @@ class Pose:
 
     def moved(self, twist: ArrayLike, dt: float) -> Pose:
         """This pose after applying a base-frame ``twist`` (m/s, rad/s) for ``dt`` s."""
-        twist = np.asarray(twist, dtype=float)
-        if twist.shape != (6,) or not np.all(np.isfinite(twist)):
-            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        p, q = integrate_pose(self.position, self.quat_wxyz, twist, dt)
+        p, q = integrate_pose(self.position, self.quat_wxyz, as_twist(twist), dt)
         return Pose(p, q)
 
     def distance(self, other: Pose) -> tuple[float, float]:

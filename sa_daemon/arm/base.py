@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ..geometry import FloatArray, Pose
+from ..geometry import FloatArray, Pose, as_twist
 
 if TYPE_CHECKING:
-    from ..config import Config
+    from ..config import Config, LimitsConfig
     from ..world.scene import Scene
 
 
@@ -74,6 +74,12 @@ def limit_twist(twist: FloatArray, linear_mps: float, angular_radps: float, tcp_
     if ang < 1.0:
         t[3:] *= ang
     return t
+
+
+def commanded_twist(twist: FloatArray, limits: LimitsConfig) -> FloatArray:
+    """A backend's last guard on a commanded ``twist`` (m/s, rad/s): ``ValueError`` (the arm changes
+    nothing) unless it is 6 finite numbers, then :func:`limit_twist` to the configured ``limits``."""
+    return limit_twist(as_twist(twist), limits.linear_mps, limits.angular_radps, limits.tcp_mps)
 
 
 class Arm(abc.ABC):

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..config import LimitsConfig
 from ..geometry import FloatArray, Pose, integrate_pose
-from .base import Arm, ArmState, limit_twist
+from .base import Arm, ArmState, commanded_twist
 
 if TYPE_CHECKING:
     from ..config import Config
@@ -42,10 +42,7 @@ class KinematicArm(Arm):
         return True
 
     def command_twist(self, twist: FloatArray) -> None:
-        t = np.asarray(twist, dtype=float)
-        if t.shape != (6,) or not np.all(np.isfinite(t)):
-            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps)
+        self._twist = commanded_twist(twist, self._limits)
 
     def command_gripper(self, closed: bool) -> None:
         """Open or close the gripper (instantly). Motion is not gated here: like the xArm, the arm moves

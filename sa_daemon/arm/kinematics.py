@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..geometry import FloatArray, Pose, rotation_error
+from ..geometry import FloatArray, Pose, as_twist, rotation_error
 
 ARM_JOINTS = ("joint1", "joint2", "joint3", "joint4", "joint5", "joint6")
 """Names of the six arm joints in ``xarm6.xml``, base to flange."""
@@ -143,9 +143,7 @@ class ArmKinematics:
            kept, the speed reduced.
         """
         q = self._q(q)
-        t = np.asarray(twist, dtype=float).reshape(-1)
-        if t.shape != (6,) or not np.all(np.isfinite(t)):
-            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
+        t = as_twist(twist)
         if not np.any(t):
             return np.zeros(self.n)
         jac = self.jacobian(q)

@@ -36,7 +36,7 @@ import numpy as np
 from ..config import Config
 from ..geometry import FloatArray, Pose
 from ..world.scene import Scene
-from .base import Arm, ArmState, limit_twist
+from .base import Arm, ArmState, commanded_twist
 from .kinematics import (
     ARM_JOINTS,
     FINGER_JOINTS,
@@ -138,10 +138,7 @@ class MujocoArm(Arm):
 
     def command_twist(self, twist: FloatArray) -> None:
         """Hold ``twist`` (m/s, rad/s, base frame) until the next command; ignored while closed."""
-        t = np.asarray(twist, dtype=float)
-        if t.shape != (6,) or not np.all(np.isfinite(t)):
-            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        self._twist = limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps)
+        self._twist = commanded_twist(twist, self._limits)
 
     def command_gripper(self, closed: bool) -> None:
         """Close (``True``: fingers driven shut) or open the gripper. Motion is not gated here: like the

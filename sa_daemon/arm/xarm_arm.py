@@ -33,7 +33,7 @@ import numpy as np
 from ..config import Config, ConfigError
 from ..extras import MissingExtra, require
 from ..geometry import FloatArray, Pose
-from .base import Arm, ArmState, Kinematics, limit_twist
+from .base import Arm, ArmState, Kinematics, commanded_twist
 from .xarm_limits import apply_limits, compare, expected_limits, read_limits
 
 if TYPE_CHECKING:
@@ -272,10 +272,7 @@ class XArm(Arm):
         Raises ``ValueError`` (and changes nothing) unless it is 6 finite numbers. Ignored while a fault
         is latched or after :meth:`close`; clipped to the configured per-axis limits as a last guard.
         """
-        t = np.asarray(twist, dtype=float)
-        if t.shape != (6,) or not np.all(np.isfinite(t)):
-            raise ValueError("twist must be 6 finite numbers (m/s, rad/s)")
-        speeds = twist_to_speeds(limit_twist(t, self._limits.linear_mps, self._limits.angular_radps, self._limits.tcp_mps))
+        speeds = twist_to_speeds(commanded_twist(twist, self._limits))
         with self._cv:
             if self._fault is not None or self._closing or (self._halted and any(speeds)):
                 self._stats["twists_dropped"] += 1
