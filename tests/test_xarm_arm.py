@@ -16,12 +16,10 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
-from sa_daemon.arm.xarm_arm import (
-    CLOSED,
-    DISCONNECTED,
+from sa_daemon.arm.xarm_arm import CLOSED, DISCONNECTED, XArm
+from sa_daemon.arm.xarm_sdk import (
     GRIPPER_CLOSED_POS,
     GRIPPER_OPEN_POS,
-    XArm,
     error_text,
     pose_from_sdk,
     twist_to_speeds,

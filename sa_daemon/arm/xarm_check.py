@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from ..config import Config
-from .xarm_arm import error_text, firmware_of, pose_from_sdk, sdk_factory
 from .xarm_limits import apply_limits, compare, expected_limits, read_limits
+from .xarm_sdk import error_text, firmware_of, pose_from_sdk, sdk_factory
 
 
 @dataclass(frozen=True)
