@@ -604,6 +604,12 @@ class AskingConfig(_Section):
     third_answer: bool = Field(
         False, description='a third answer, "yes, that object, but another grasp" (the paper: yes or no only)'
     )
+    withdraw_yes_s: float = Field(
+        0.0, ge=0, le=30,
+        description='a "yes" stops being final once the user has opposed the assistance in blend.opposition_share '
+        "of the control periods with input over this window (s): a misheard or mistaken yes no longer holds the "
+        "arm on the wrong target; 0 = a yes is final (our reading of section III-B; docs/model.md)",
+    )
     answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
         ("button", "command", "voice"),
         description="where answers are taken from: the joystick's buttons, the protocol (and the page), the voice",

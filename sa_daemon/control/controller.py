@@ -108,6 +108,8 @@ class Controller:
         self._axes = np.zeros(3)
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
+        self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)  # opposition since the last "yes"
+        self._withdrawn = 0  # "yes" answers withdrawn this task
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
@@ -304,6 +306,7 @@ class Controller:
             raise ValueError("the third answer is off (asking.third_answer)")
         self._belief = self._model.update_answer(self._belief, q.target, answer if answer == "other" else
                                                  answer in (True, "yes"))
+        self._against_yes.clear()
         self._question = None
         self.drop_plan()
         return q
@@ -390,6 +393,8 @@ class Controller:
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
         self._opposition.clear()
+        self._against_yes.clear()
+        self._withdrawn = 0
         self._yield = None
         self._safety.restart()
 
@@ -425,6 +430,8 @@ class Controller:
         self._axes_out = np.zeros(3)  # a new filter starts at rest, as at start-up
         if cfg.blend.opposition_window_s != self._opposition.window_s:
             self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
+        if cfg.asking.withdraw_yes_s != self._against_yes.window_s:
+            self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""
@@ -445,7 +452,9 @@ class Controller:
         try:
             reach = self._model.reach_poses(b.goals, state.pose, b.pose_log_w)
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
-            self._yield = self._yield_reason(t, state.pose, cmd, fresh and bool(np.any(u)))
+            has_input = fresh and bool(np.any(u))
+            self._withdraw_yes_if_opposed(t, cmd, has_input)
+            self._yield = self._yield_reason(t, state.pose, cmd, has_input)
             if self._yield is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
                 cmd = self._model.command(NO_ASSIST, b.goals, b.probs, state.pose, u, self._method)
         except (ValueError, FloatingPointError) as e:
@@ -464,6 +473,26 @@ class Controller:
         ``"user_opposes"`` (the person has kept opposing the assistance over ``blend.opposition_window_s``:
         they want a pose of their own); ``None`` otherwise."""
         return self._yield
+
+    @property
+    def yes_withdrawn(self) -> int:
+        """How many "yes" answers this task were withdrawn because the user kept opposing the assistance
+        (``asking.withdraw_yes_s``)."""
+        return self._withdrawn
+
+    def _withdraw_yes_if_opposed(self, t: float, cmd: Command, has_input: bool) -> None:
+        """``asking.withdraw_yes_s`` (off by default): while a "yes" holds and the arm assists, count the
+        periods with input that oppose it; once they are ``blend.opposition_share`` of the window, the
+        yes is withdrawn (:meth:`~..model.belief.Belief.without_confirmation`) and the plan dropped."""
+        if self._cfg.asking.withdraw_yes_s <= 0.0 or self._belief.confirmed is None:
+            return
+        if has_input and cmd.action.kind in (ActionKind.MOVE, ActionKind.HO):
+            self._against_yes.add(t, bool(cmd.opposed))
+        if user_opposes(self._against_yes, t, self._cfg.blend.opposition_share):
+            self._belief = self._belief.without_confirmation()
+            self._against_yes.clear()
+            self._withdrawn += 1
+            self.drop_plan()
 
     def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
         """The paper's future work (section VI-E.4), both off by default: see :attr:`yielding`."""

@@ -206,6 +206,11 @@ class Belief:
         log_p = self._normalised(self.log_p + np.log(like), cfg.cap)
         return self._with(log_p, target) if yes else self._with(log_p, ruled_out=frozenset({target}))
 
+    def without_confirmation(self) -> Belief:
+        """This belief with its "yes" withdrawn (``asking.withdraw_yes_s``): the same probabilities, the
+        "no" answers kept, and joystick input free again to move the confirmed target's total."""
+        return Belief(self.goals, self.log_p, None, self.ruled_out, self.pose_log_w, self.anchor)
+
     def siblings(self, target: str) -> list[str]:
         """The other targets (grasp types) of ``target``'s object."""
         obj = target_object(target)
