@@ -1,0 +1,95 @@
+"""A "yes" that stops being final (``asking.withdraw_yes_s``, off by default).
+
+A yes is final in the paper's reading (docs/model.md, "A yes is final"); a misheard or mistaken yes then
+holds the arm on the wrong object while the person fights it. With the switch on, a yes is withdrawn
+once the person has opposed the assistance in ``blend.opposition_share`` of the control periods with
+input over the window: the probabilities stay, the "no" answers stay, and joystick input may move the
+confirmed target's total again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sa_daemon.arm.base import ArmState
+from sa_daemon.config import ConfigError, config_from_dict
+from sa_daemon.control.controller import Controller
+from sa_daemon.model.actions import HO_ACTION
+from sa_daemon.world.scene import load_scene
+
+SCENE = load_scene("scene1")
+DT = 0.01
+START = SCENE.start
+
+
+def answered(withdraw_yes_s: float) -> Controller:
+    """HO assisting after "is it the bowl?" - "yes" and "is it the chips can?" - "no"."""
+    ctl = Controller(config_from_dict({"asking": {"withdraw_yes_s": withdraw_yes_s}}), SCENE.goals, "ho", DT)
+    for target, answer in (("chips can:side", False), ("bowl:top", True)):
+        ctl.ask(target, 0.0)
+        ctl.on_answer(answer, 0.0)
+    ctl.adopt_fixed()
+    return ctl
+
+
+def against_ho(ctl: Controller) -> np.ndarray:
+    """Joystick axes pushing against HO's pull on every axis it moves (as a person heading elsewhere)."""
+    b = ctl.belief
+    ho = ctl.model.robot_twist(HO_ACTION, b.goals, b.probs, START, np.zeros(6))
+    return -np.sign(ho[:3]) * (np.abs(ho[:3]) > 0.01)
+
+
+def drive(ctl: Controller, axes, seconds: float, t0: float, update_belief: bool = False) -> float:
+    st, t = ArmState(START, False, None, None), t0
+    while t < t0 + seconds:
+        ctl.on_input(axes, t)
+        if update_belief:
+            ctl.update_belief(START, t)
+        ctl.adopt_fixed()  # the HO method's plan, as the evaluation's step loop keeps it
+        ctl.tick(st, t)
+        t += DT
+    return t
+
+
+def test_a_yes_is_withdrawn_after_a_window_of_opposition_and_nothing_else_changes():
+    ctl = answered(1.0)
+    assert ctl.belief.confirmed == "bowl:top"
+    before = ctl.belief
+    away = against_ho(ctl)
+    t = drive(ctl, away, 0.4, 0.0)
+    assert ctl.belief.confirmed == "bowl:top" and ctl.yes_withdrawn == 0  # under half the window: not yet
+    drive(ctl, away, 0.8, t)
+    b = ctl.belief
+    assert b.confirmed is None and ctl.yes_withdrawn == 1
+    np.testing.assert_array_equal(b.log_p, before.log_p)  # the probabilities as they were
+    assert b.ruled_out == frozenset({"chips can:side"})  # the "no" stays final
+    ctl.reset()
+    assert ctl.yes_withdrawn == 0
+
+
+def test_a_yes_stays_final_when_off_or_when_the_user_goes_along():
+    off = answered(0.0)
+    drive(off, against_ho(off), 3.0, 0.0)
+    assert off.belief.confirmed == "bowl:top" and off.yes_withdrawn == 0
+    along = answered(1.0)
+    drive(along, -against_ho(along), 3.0, 0.0)
+    assert along.belief.confirmed == "bowl:top" and along.yes_withdrawn == 0
+
+
+def test_after_the_withdrawal_the_joystick_moves_the_answered_target_again():
+    """Held final, the bowl keeps its total whatever the input says; withdrawn, input heading away from it
+    takes probability from it."""
+    share = {}
+    for window in (0.0, 1.0):
+        ctl = answered(window)
+        p0 = ctl.belief.target_probabilities()["bowl:top"]
+        drive(ctl, against_ho(ctl), 4.0, 0.0, update_belief=True)
+        share[window] = (p0, ctl.belief.target_probabilities()["bowl:top"])
+    assert share[0.0][1] == pytest.approx(share[0.0][0], abs=1e-9)
+    assert share[1.0][1] < 0.5 * share[1.0][0]
+
+
+def test_a_bad_window_is_refused_naming_the_key():
+    with pytest.raises(ConfigError, match="asking.withdraw_yes_s"):
+        config_from_dict({"asking": {"withdraw_yes_s": -1.0}})
