@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import DaemonProc
 
 from sa_daemon.arm.base import ArmState
 from sa_daemon.config import ConfigError, config_from_dict
@@ -93,3 +94,22 @@ def test_after_the_withdrawal_the_joystick_moves_the_answered_target_again():
 def test_a_bad_window_is_refused_naming_the_key():
     with pytest.raises(ConfigError, match="asking.withdraw_yes_s"):
         config_from_dict({"asking": {"withdraw_yes_s": -1.0}})
+
+
+def test_a_daemon_whose_user_always_answers_wrongly_withdraws_the_yes_and_finishes_the_task(tmp_path):
+    """The real daemon (policy, Scene 1 ``cup:top``) with a simulated user who answers every question
+    wrongly: the first wrong "yes" is withdrawn, published as ``yes_withdrawn``, and the task still
+    ends in a success."""
+    d = DaemonProc(tmp_path, "--duration", "120", "--no-speech",
+                   config="[asking]\nwithdraw_yes_s = 1.0\n[sim_user]\nanswer_error_rate = 1.0\n")
+    try:
+        d.wait_ready()
+        c = d.collector
+        i, yes = c.event("answer", timeout_s=90, value="yes")
+        assert yes["goal"] != "cup:top"  # wrong, as configured
+        j, gone = c.event("yes_withdrawn", timeout_s=30, start=i, goal=yes["goal"])
+        assert 0.5 <= gone["t"] - yes["t"] <= 10.0  # at least half the window of opposition, then at once
+        _, done = c.event("task_done", timeout_s=90, start=j)
+        assert done["success"] is True and done["timed_out"] is False
+    finally:
+        d.close()

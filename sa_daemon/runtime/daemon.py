@@ -300,7 +300,10 @@ class Daemon:
         if state.fault and state.fault != self.fault_reported:
             self.fault_reported = state.fault
             self.event("fault", source="arm", detail=state.fault)
+        confirmed, withdrawn = ctl.belief.confirmed, ctl.yes_withdrawn
         tick = ctl.tick(state, mono)
+        if ctl.yes_withdrawn > withdrawn:
+            self.event("yes_withdrawn", goal=confirmed)
         if tick.error is not None:
             self.event("fault", source="command", detail=tick.error)
         arm.command_twist(tick.safety.twist)
