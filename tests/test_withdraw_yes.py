@@ -67,6 +67,11 @@ def test_a_yes_is_withdrawn_after_a_window_of_opposition_and_nothing_else_change
     assert b.ruled_out == frozenset({"chips can:side"})  # the "no" stays final
     ctl.reset()
     assert ctl.yes_withdrawn == 0
+    again = answered(1.0)
+    drive(again, against_ho(again), 1.2, 0.0)
+    assert again.yes_withdrawn == 1
+    again.new_goals(SCENE.goals)  # a new scene is a new task too
+    assert again.yes_withdrawn == 0
 
 
 def test_a_yes_stays_final_when_off_or_when_the_user_goes_along():

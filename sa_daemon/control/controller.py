@@ -419,6 +419,8 @@ class Controller:
         self._belief = self._model.initial_belief(goals)
         self._asked.clear()
         self._question = None
+        self._against_yes.clear()
+        self._withdrawn = 0
         self.drop_plan()
 
     def reconfigure(self, cfg: Config) -> None:
