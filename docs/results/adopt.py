@@ -1,16 +1,24 @@
 """Session 19's rule for adopting a model or tracker option as the default, checked on suite files.
 
-    python docs/results/adopt.py TAG [--dir DIR] [--default marginal]
+    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28]
 
 reads ``DIR/suite-{table1,study-simple,fig7}-TAG.json`` (the option's runs, ``DIR`` defaults to this folder)
-and ``docs/results/suite-{...}-marginal.json`` (the default's), paired by (scene, task, method, user), and
-prints the verdict of the rule written down before session 19's run (``docs/model.md``, "A goal's grasps
-read together"): adopt if, on Table I, the simple study and Fig. 7, HO and policy,
+and ``DEFAULT_DIR/suite-{...}-marginal.json`` (the default's, this folder unless told), paired by (scene,
+task, method, user), and prints the verdict of the rule written down before session 19's run
+(``docs/model.md``, "A goal's grasps read together"): adopt if, on Table I, the simple study and Fig. 7,
+HO and policy,
 
 (a) the policy's correct prediction rises on Scene 2 and falls below 0.9 on no task that was at or above it;
 (b) no (task, method) loses more than 2 successes;
 (c) for each method, the (task, user) cells whose mean completion time (s, successful trials) rises by more
     than 5 % are no more than those whose mean time falls by more than 5 %.
+
+``--rule s28`` is session 28's rule for options that leave the tracker as it is (``docs/model.md``, "A
+confirmatory run on fresh seeds"): (b) and (c) as above, and in place of (a)
+
+(a') on every task the policy's end-of-trial log p(true target) is shown not to be lower by more than 0.1
+     (a non-inferiority test): the paired mean difference (option minus default, same user and seed, p
+     floored at 1e-6) has the lower end of its 95 % interval (mean - 1.96 standard errors) above -0.1.
 
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
@@ -20,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -31,6 +40,9 @@ HERE = Path(__file__).resolve().parent
 RULE_SUITES = ("table1", "study-simple", "fig7")
 ALL_SUITES = (*RULE_SUITES, "study-complex")
 MAX_LOST = 2          # (b): successes a (task, method) may lose
+P_FLOOR = 1e-6        # (a'): the floor of p(true target) before its log
+Z95 = 1.96            # (a'): the normal interval's half-width in standard errors
+MARGIN = 0.1          # (a'): the non-inferiority margin of the mean log p (nats)
 PREDICTION = 0.9      # (a): the prediction floor
 CELL_CHANGE = 0.05    # (c): a cell is faster / slower beyond this fraction of its old time
 
@@ -77,17 +89,42 @@ def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
     return out
 
 
-def judge(rows: list[dict], cells: dict[str, list[int]]) -> list[str]:
-    """The rule's failures, one line each (an empty list: adopt)."""
+def logp_changes(new: dict, old: dict) -> dict[tuple[str, str], tuple[float, float, float]]:
+    """Per (scene, task), the policy's paired change of the end-of-trial log p(true target): ``(mean, low,
+    high)`` of option minus default over the trials of the same user and seed, the 95 % normal interval."""
+    key = ("scene", "task", "method", "user", "seed")
+    before = {tuple(t[k] for k in key): t["final_target_p"] for t in old["trials"]}
+    diffs: dict[tuple[str, str], list[float]] = {}
+    for t in new["trials"]:
+        o = before.get(tuple(t[k] for k in key))
+        if t["method"] != "policy" or o is None:
+            continue
+        diffs.setdefault((t["scene"], t["task"]), []).append(
+            math.log(max(t["final_target_p"], P_FLOOR)) - math.log(max(o, P_FLOOR)))
+    out = {}
+    for k, d in diffs.items():
+        m = sum(d) / len(d)
+        se = (sum((x - m) ** 2 for x in d) / (len(d) - 1) / len(d)) ** 0.5 if len(d) > 1 else math.inf
+        out[k] = (m, m - Z95 * se, m + Z95 * se)
+    return out
+
+
+def judge(rows: list[dict], cells: dict[str, list[int]],
+          logp: dict[tuple[str, str], tuple[float, float, float]] | None = None) -> list[str]:
+    """The rule's failures, one line each (an empty list: adopt). With ``logp`` (session 28's rule) part (a)
+    is the paired log p test instead of the prediction rates."""
     fails = []
     for r in rows:
         (so, sn), (po, pn) = r["successes"], r["prediction"]
         if so is not None and sn < so - MAX_LOST:
             fails.append(f"(b) {r['task']} {r['method']}: {so} -> {sn} successes")
-        if r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
+        if logp is None and r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
             fails.append(f"(a) {r['task']}: prediction {po:.2f} -> {pn:.2f}")
+    for (scene, task), (m, lo, hi) in (logp or {}).items():
+        if lo < -MARGIN:
+            fails.append(f"(a') {scene} {task}: log p {m:+.3f} [{lo:+.3f}, {hi:+.3f}]")
     scene2 = [r for r in rows if r["scene"] == "scene2" and r["method"] == "policy"]
-    if scene2:
+    if scene2 and logp is None:
         po = _mean([r["prediction"][0] for r in scene2])
         pn = _mean([r["prediction"][1] for r in scene2])
         if pn <= po:
@@ -107,8 +144,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("tag")
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
+    ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
+    ap.add_argument("--rule", choices=("s19", "s28"), default="s19",
+                    help="s19: session 19's rule; s28: session 28's, for options that leave the tracker")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
+    judged_logp: dict[tuple[str, str], tuple[float, float, float]] = {}
     judged_cells: dict[str, list[int]] = {}
     lines = ["| suite | task | method | successes | time s | prediction | questions |", "|" + "---|" * 7]
     for suite in ALL_SUITES:
@@ -116,8 +157,10 @@ def main(argv: list[str] | None = None) -> int:
         if not path.exists():
             continue
         new = json.loads(path.read_text())
-        old = json.loads((HERE / f"suite-{suite}-{args.default}.json").read_text())
-        rows, cells = task_rows(new, old), cell_changes(new, old)
+        old = json.loads((args.default_dir / f"suite-{suite}-{args.default}.json").read_text())
+        rows, cells, logp = task_rows(new, old), cell_changes(new, old), logp_changes(new, old)
+        for (scene, task), (m, lo, hi) in logp.items():
+            print(f"{suite} {scene} {task}: policy log p(true target) at the end {m:+.3f} [{lo:+.3f}, {hi:+.3f}]")
         for r in rows:
             lines.append(f"| {suite} | `{r['task']}` | {r['method']} | {_f(r['successes'][0], 0)} -> {r['successes'][1]} | "
                          f"{_f(r['time_s'][0], 1)} -> {_f(r['time_s'][1], 1)} | "
@@ -129,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         print("\n".join(v for v in verdicts(new["comparisons"]) + verdicts(old["comparisons"]) if "| ho |" in v))
         if suite in RULE_SUITES:
             judged_rows += rows
+            judged_logp.update(logp)
             for m, (f, s) in cells.items():
                 judged_cells.setdefault(m, [0, 0])
                 judged_cells[m][0] += f
@@ -137,8 +181,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no suite-*-{args.tag}.json of {', '.join(RULE_SUITES)} in {args.dir}", file=sys.stderr)
         return 2
     print("\n" + "\n".join(lines) + "\n")
-    fails = judge(judged_rows, judged_cells)
-    print("Session 19's rule: " + ("adopt" if not fails else "off"))
+    fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None)
+    print(f"Session {args.rule[1:]}'s rule: " + ("adopt" if not fails else "off"))
     for f in fails:
         print("  " + f)
     return 0
