@@ -12,7 +12,8 @@ import pytest
 from sa_daemon.arm.base import ArmState
 from sa_daemon.arm.kinematic import KinematicArm
 from sa_daemon.config import Config, config_from_dict, load_config
-from sa_daemon.control.controller import Controller, NoQuestion
+from sa_daemon.control.controller import Controller
+from sa_daemon.control.outputs import NoQuestion
 from sa_daemon.control.safety import SafetyCode
 from sa_daemon.geometry import Pose
 from sa_daemon.model.actions import HO_ACTION, NO_ASSIST, Action, ActionKind, Mode

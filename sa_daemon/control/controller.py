@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import weakref
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,54 +34,9 @@ from ..model.twists import axes_to_twist
 from ..planner.snapshot import PlanResult, Snapshot
 from ..world.goalset import GoalSet
 from .lowpass import LowPass
-from .safety import SafetyPipeline, SafetyResult
+from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
+from .safety import SafetyPipeline
 from .yielding import OppositionWindow, near_object, user_opposes
-
-ZERO6 = np.zeros(6)
-
-
-class NoQuestion(ValueError):
-    """An answer arrived while no question is pending."""
-
-
-@dataclass(frozen=True)
-class Plan:
-    """An adopted action, the goal set its ``goal`` index refers to, and when it expires (s): a late
-    planner leaves the arm on no-assist instead of an old move."""
-
-    action: Action
-    goals: GoalSet
-    until: float
-
-
-@dataclass(frozen=True)
-class Question:
-    """The pending question about ``target``, asked at ``asked_at`` (s); ``qid`` numbers the questions so
-    that a late answer to one cannot answer the next."""
-
-    target: str
-    asked_at: float
-    qid: int
-
-
-@dataclass(frozen=True)
-class Tick:
-    """One control period's output: the model's blended command, what the safety pipeline made of it
-    (``safety.twist`` is what the arm gets), whether the user's input was fresh, and the error text when
-    the command could not be computed (the arm then gets the user's twist alone, filtered)."""
-
-    command: Command
-    safety: SafetyResult
-    fresh: bool
-    error: str | None = None
-
-    @property
-    def refused(self) -> bool:
-        """The pipeline halted a command that asked for motion (what a UI shows as 'blocked')."""
-        return self.safety.refuses(self.command.total_twist)
-
-
-IDLE_TICK = Tick(Command(NO_ASSIST, ZERO6.copy(), ZERO6.copy(), False), SafetyResult(ZERO6.copy(), ()), False)
 
 
 class Controller:

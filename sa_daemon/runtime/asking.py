@@ -17,7 +17,8 @@ from collections.abc import Callable
 from typing import Any
 
 from ..config import Config
-from ..control.controller import Controller, NoQuestion, Question
+from ..control.controller import Controller
+from ..control.outputs import NoQuestion, Question
 from ..io.protocol import RequestError
 from ..speech.speaker import Speaker, Spoken, echo_text, question_text
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..arm.base import ArmState
-from ..control.controller import Question, Tick
+from ..control.outputs import Question, Tick
 from ..model.actions import Action, Mode
 from ..model.belief import Belief
 from ..speech.speaker import question_text
