@@ -20,6 +20,11 @@ confirmatory run on fresh seeds"): (b) and (c) as above, and in place of (a)
      (a non-inferiority test): the paired mean difference (option minus default, same user and seed, p
      floored at 1e-6) has the lower end of its 95 % interval (mean - 1.96 standard errors) above -0.1.
 
+``--rule s28b`` is the same with (a') replaced, after (a') proved unpassable at 80 trials a task:
+
+(a'') on no task has the policy fewer correct predictions (the paper's measure) than the default by an
+      exact one-sided McNemar test at p < 0.05 (pairs: same user and seed), no correction for the tasks.
+
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
 """
@@ -43,6 +48,7 @@ MAX_LOST = 2          # (b): successes a (task, method) may lose
 P_FLOOR = 1e-6        # (a'): the floor of p(true target) before its log
 Z95 = 1.96            # (a'): the normal interval's half-width in standard errors
 MARGIN = 0.1          # (a'): the non-inferiority margin of the mean log p (nats)
+ALPHA = 0.05          # (a''): the one-sided McNemar test's level
 PREDICTION = 0.9      # (a): the prediction floor
 CELL_CHANGE = 0.05    # (c): a cell is faster / slower beyond this fraction of its old time
 
@@ -109,22 +115,47 @@ def logp_changes(new: dict, old: dict) -> dict[tuple[str, str], tuple[float, flo
     return out
 
 
+def prediction_flips(new: dict, old: dict) -> dict[tuple[str, str], tuple[int, int, float]]:
+    """Per (scene, task), the policy's discordant pairs of correct prediction (same user and seed): ``(lost,
+    gained, p)``, lost = right under the default and wrong under the option, p the exact one-sided
+    McNemar p-value of that many losses or more among the discordant pairs."""
+    key = ("scene", "task", "method", "user", "seed")
+    before = {tuple(t[k] for k in key): t["correct_prediction"] for t in old["trials"]}
+    flips: dict[tuple[str, str], list[int]] = {}
+    for t in new["trials"]:
+        o = before.get(tuple(t[k] for k in key))
+        if t["method"] != "policy" or o is None:
+            continue
+        f = flips.setdefault((t["scene"], t["task"]), [0, 0])
+        f[0] += bool(o) and not t["correct_prediction"]
+        f[1] += (not o) and bool(t["correct_prediction"])
+    out = {}
+    for k, (lost, gained) in flips.items():
+        n = lost + gained
+        out[k] = (lost, gained, sum(math.comb(n, i) for i in range(lost, n + 1)) / 2 ** n if n else 1.0)
+    return out
+
+
 def judge(rows: list[dict], cells: dict[str, list[int]],
-          logp: dict[tuple[str, str], tuple[float, float, float]] | None = None) -> list[str]:
-    """The rule's failures, one line each (an empty list: adopt). With ``logp`` (session 28's rule) part (a)
-    is the paired log p test instead of the prediction rates."""
+          logp: dict[tuple[str, str], tuple[float, float, float]] | None = None,
+          flips: dict[tuple[str, str], tuple[int, int, float]] | None = None) -> list[str]:
+    """The rule's failures, one line each (an empty list: adopt). With ``logp`` (session 28's rule) or
+    ``flips`` (its second form) part (a) is that paired test instead of the prediction rates."""
     fails = []
     for r in rows:
         (so, sn), (po, pn) = r["successes"], r["prediction"]
         if so is not None and sn < so - MAX_LOST:
             fails.append(f"(b) {r['task']} {r['method']}: {so} -> {sn} successes")
-        if logp is None and r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
+        if logp is None and flips is None and r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
             fails.append(f"(a) {r['task']}: prediction {po:.2f} -> {pn:.2f}")
+    for (scene, task), (lost, gained, p) in (flips or {}).items():
+        if p < ALPHA:
+            fails.append(f"(a'') {scene} {task}: correct predictions lost {lost}, gained {gained} (p = {p:.3f})")
     for (scene, task), (m, lo, hi) in (logp or {}).items():
         if lo < -MARGIN:
             fails.append(f"(a') {scene} {task}: log p {m:+.3f} [{lo:+.3f}, {hi:+.3f}]")
     scene2 = [r for r in rows if r["scene"] == "scene2" and r["method"] == "policy"]
-    if scene2 and logp is None:
+    if scene2 and logp is None and flips is None:
         po = _mean([r["prediction"][0] for r in scene2])
         pn = _mean([r["prediction"][1] for r in scene2])
         if pn <= po:
@@ -145,11 +176,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
     ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
-    ap.add_argument("--rule", choices=("s19", "s28"), default="s19",
-                    help="s19: session 19's rule; s28: session 28's, for options that leave the tracker")
+    ap.add_argument("--rule", choices=("s19", "s28", "s28b"), default="s19",
+                    help="s19: session 19's rule; s28, s28b: session 28's, for options that leave the tracker")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
     judged_logp: dict[tuple[str, str], tuple[float, float, float]] = {}
+    judged_flips: dict[tuple[str, str], tuple[int, int, float]] = {}
     judged_cells: dict[str, list[int]] = {}
     lines = ["| suite | task | method | successes | time s | prediction | questions |", "|" + "---|" * 7]
     for suite in ALL_SUITES:
@@ -159,6 +191,9 @@ def main(argv: list[str] | None = None) -> int:
         new = json.loads(path.read_text())
         old = json.loads((args.default_dir / f"suite-{suite}-{args.default}.json").read_text())
         rows, cells, logp = task_rows(new, old), cell_changes(new, old), logp_changes(new, old)
+        flips = prediction_flips(new, old)
+        for (scene, task), (lost, gained, p) in flips.items():
+            print(f"{suite} {scene} {task}: policy correct predictions lost {lost}, gained {gained}, McNemar p {p:.3f}")
         for (scene, task), (m, lo, hi) in logp.items():
             print(f"{suite} {scene} {task}: policy log p(true target) at the end {m:+.3f} [{lo:+.3f}, {hi:+.3f}]")
         for r in rows:
@@ -173,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         if suite in RULE_SUITES:
             judged_rows += rows
             judged_logp.update(logp)
+            judged_flips.update(flips)
             for m, (f, s) in cells.items():
                 judged_cells.setdefault(m, [0, 0])
                 judged_cells[m][0] += f
@@ -181,8 +217,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no suite-*-{args.tag}.json of {', '.join(RULE_SUITES)} in {args.dir}", file=sys.stderr)
         return 2
     print("\n" + "\n".join(lines) + "\n")
-    fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None)
-    print(f"Session {args.rule[1:]}'s rule: " + ("adopt" if not fails else "off"))
+    fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None,
+                  judged_flips if args.rule == "s28b" else None)
+    print(f"Rule {args.rule}: " + ("adopt" if not fails else "off"))
     for f in fails:
         print("  " + f)
     return 0
