@@ -6,7 +6,7 @@
     [input]      # filter_hz: the tremor filter
     [blend]      # alpha: the assistance level, 0.2-0.8 in a profile
     [speech]     # voice, rate_wpm, volume of the questions
-    [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s
+    [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s
 
 Only these keys may appear; everything is validated as configuration is (an error names the file and
 the key), and a profile never changes what is not listed. ``run --profile NAME|FILE`` applies one at
@@ -31,7 +31,8 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
     "input": frozenset({"filter_hz"}),
     "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
-    "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s"}),
+    "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s",
+                          "withdraw_no_s"}),
 }
 #: The assistance level a profile may choose (the paper's 0.5 in the middle): enough of the person's own
 #: input always passes, and enough assistance to matter.

@@ -63,7 +63,9 @@ class Controller:
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
         self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)  # opposition since the last "yes"
+        self._against_no = OppositionWindow(cfg.asking.withdraw_no_s)  # opposition since the last "no"
         self._withdrawn = 0  # "yes" answers withdrawn this task
+        self._withdrawn_no = 0  # times the "no" answers were withdrawn this task
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
@@ -261,6 +263,7 @@ class Controller:
         self._belief = self._model.update_answer(self._belief, q.target, answer if answer == "other" else
                                                  answer in (True, "yes"))
         self._against_yes.clear()
+        self._against_no.clear()
         self._question = None
         self.drop_plan()
         return q
@@ -347,8 +350,7 @@ class Controller:
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
         self._opposition.clear()
-        self._against_yes.clear()
-        self._withdrawn = 0
+        self._clear_withdrawals()
         self._yield = None
         self._safety.restart()
 
@@ -373,8 +375,7 @@ class Controller:
         self._belief = self._model.initial_belief(goals)
         self._asked.clear()
         self._question = None
-        self._against_yes.clear()
-        self._withdrawn = 0
+        self._clear_withdrawals()
         self.drop_plan()
 
     def reconfigure(self, cfg: Config) -> None:
@@ -388,6 +389,8 @@ class Controller:
             self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
         if cfg.asking.withdraw_yes_s != self._against_yes.window_s:
             self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)
+        if cfg.asking.withdraw_no_s != self._against_no.window_s:
+            self._against_no = OppositionWindow(cfg.asking.withdraw_no_s)
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""
@@ -409,7 +412,7 @@ class Controller:
             reach = self._model.reach_poses(b.goals, state.pose, b.pose_log_w)
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             has_input = fresh and bool(np.any(u))
-            self._withdraw_yes_if_opposed(t, cmd, has_input)
+            self._withdraw_answers_if_opposed(t, cmd, has_input)
             self._yield = self._yield_reason(t, state.pose, cmd, has_input)
             if self._yield is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
                 cmd = self._model.command(NO_ASSIST, b.goals, b.probs, state.pose, u, self._method)
@@ -436,19 +439,46 @@ class Controller:
         (``asking.withdraw_yes_s``)."""
         return self._withdrawn
 
-    def _withdraw_yes_if_opposed(self, t: float, cmd: Command, has_input: bool) -> None:
-        """``asking.withdraw_yes_s`` (off by default): while a "yes" holds and the arm assists, count the
-        periods with input that oppose it; once they are ``blend.opposition_share`` of the window, the
-        yes is withdrawn (:meth:`~..model.belief.Belief.without_confirmation`) and the plan dropped."""
-        if self._cfg.asking.withdraw_yes_s <= 0.0 or self._belief.confirmed is None:
+    @property
+    def no_withdrawn(self) -> int:
+        """How many times this task the "no" answers were withdrawn because the user kept opposing the
+        assistance (``asking.withdraw_no_s``)."""
+        return self._withdrawn_no
+
+    def _clear_withdrawals(self) -> None:
+        """A new task or scene: both opposition windows empty, no answer withdrawn yet."""
+        self._against_yes.clear()
+        self._against_no.clear()
+        self._withdrawn = 0
+        self._withdrawn_no = 0
+
+    def _withdraw_answers_if_opposed(self, t: float, cmd: Command, has_input: bool) -> None:
+        """``asking.withdraw_yes_s`` and ``asking.withdraw_no_s`` (both off by default): while a "yes" holds
+        (else while a "no" does) and the arm assists, count the periods with input that oppose it; once
+        they are ``blend.opposition_share`` of the window, the yes is withdrawn
+        (:meth:`~..model.belief.Belief.without_confirmation`), or the no answers are
+        (:meth:`~..model.belief.Belief.without_denials`), and the plan dropped."""
+        b, a = self._belief, self._cfg.asking
+        if b.confirmed is not None:
+            window, seconds = self._against_yes, a.withdraw_yes_s
+        elif b.ruled_out:
+            window, seconds = self._against_no, a.withdraw_no_s
+        else:
+            return
+        if seconds <= 0.0:
             return
         if has_input and cmd.action.kind in (ActionKind.MOVE, ActionKind.HO):
-            self._against_yes.add(t, bool(cmd.opposed))
-        if user_opposes(self._against_yes, t, self._cfg.blend.opposition_share):
-            self._belief = self._belief.without_confirmation()
-            self._against_yes.clear()
+            window.add(t, bool(cmd.opposed))
+        if not user_opposes(window, t, self._cfg.blend.opposition_share):
+            return
+        window.clear()
+        if b.confirmed is not None:
+            self._belief = b.without_confirmation()
             self._withdrawn += 1
-            self.drop_plan()
+        else:
+            self._belief = b.without_denials()
+            self._withdrawn_no += 1
+        self.drop_plan()
 
     def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
         """The paper's future work (section VI-E.4), both off by default: see :attr:`yielding`."""

@@ -211,6 +211,12 @@ class Belief:
         "no" answers kept, and joystick input free again to move the confirmed target's total."""
         return Belief(self.goals, self.log_p, None, self.ruled_out, self.pose_log_w, self.anchor)
 
+    def without_denials(self) -> Belief:
+        """This belief with its "no" answers withdrawn (``asking.withdraw_no_s``): the same probabilities
+        (a denied target keeps the small share its answer left it) and joystick input free again to move
+        every target; a "yes" is kept."""
+        return Belief(self.goals, self.log_p, self.confirmed, frozenset(), self.pose_log_w, self.anchor)
+
     def siblings(self, target: str) -> list[str]:
         """The other targets (grasp types) of ``target``'s object."""
         obj = target_object(target)

@@ -300,10 +300,12 @@ class Daemon:
         if state.fault and state.fault != self.fault_reported:
             self.fault_reported = state.fault
             self.event("fault", source="arm", detail=state.fault)
-        confirmed, withdrawn = ctl.belief.confirmed, ctl.yes_withdrawn
+        b, withdrawn = ctl.belief, (ctl.yes_withdrawn, ctl.no_withdrawn)
         tick = ctl.tick(state, mono)
-        if ctl.yes_withdrawn > withdrawn:
-            self.event("yes_withdrawn", goal=confirmed)
+        if ctl.yes_withdrawn > withdrawn[0]:
+            self.event("yes_withdrawn", goal=b.confirmed)
+        if ctl.no_withdrawn > withdrawn[1]:
+            self.event("no_withdrawn", goals=sorted(b.ruled_out))
         if tick.error is not None:
             self.event("fault", source="command", detail=tick.error)
         arm.command_twist(tick.safety.twist)

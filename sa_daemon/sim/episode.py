@@ -88,6 +88,7 @@ class TrialResult:
     early_plans: dict[str, int] = field(default_factory=dict)  # actions planned in the first EARLY_S, by kind
     user: str = "calibrated"  # the simulated user's profile (sim/users.py)
     yes_withdrawn: int = 0  # "yes" answers withdrawn against the user's opposition (asking.withdraw_yes_s)
+    no_withdrawn: int = 0  # times the "no" answers were withdrawn so (asking.withdraw_no_s)
 
     def metrics(self) -> dict:
         """The JSON record of the trial (without the timeline)."""
@@ -97,7 +98,7 @@ class TrialResult:
                 "scene", "task", "user", "method", "seed", "success", "failure", "failure_kind",
                 "completion_time_s", "asked", "early_plans", "mode_changes",
                 "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
-                "yes_withdrawn",
+                "yes_withdrawn", "no_withdrawn",
             )
         }
 
@@ -264,6 +265,7 @@ def run_trial(
         correct_prediction=metrics.correct_prediction(final_p),
         questions=len(ctl.asked),
         yes_withdrawn=ctl.yes_withdrawn,
+        no_withdrawn=ctl.no_withdrawn,
         final_target_p=final_p,
         plans=plans,
         targets=targets,
