@@ -90,8 +90,10 @@ def rerun(path: Path, jobs: int, write: bool) -> None:
         return
     cfg = _config(meta["config"])
     users = meta.get("users") or ["calibrated"]
+    # The seeds the file holds (runs with --first-seed start elsewhere than 0), else the first meta["seeds"].
+    seeds = sorted({t["seed"] for t in data.get("trials", [])}) or range(meta["seeds"])
     specs = [TrialSpec(p["scene"], task, method, seed, user) for p in parts for task in p["tasks"] for user in users
-             for method in p["methods"] for seed in range(meta["seeds"])]
+             for method in p["methods"] for seed in seeds]
     trials = run_trials(specs, cfg, jobs=jobs, progress=False, arm=meta.get("arm", "kinematic"))
     summary = summarise(trials)
     comparisons = compare(trials)
