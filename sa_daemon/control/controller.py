@@ -36,6 +36,7 @@ from ..world.goalset import GoalSet
 from .lowpass import LowPass
 from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
 from .safety import SafetyPipeline
+from .withdrawal import AnswerWithdrawal
 from .yielding import OppositionWindow, near_object, user_opposes
 
 
@@ -62,10 +63,7 @@ class Controller:
         self._axes = np.zeros(3)
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
-        self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)  # opposition since the last "yes"
-        self._against_no = OppositionWindow(cfg.asking.withdraw_no_s)  # opposition since the last "no"
-        self._withdrawn = 0  # "yes" answers withdrawn this task
-        self._withdrawn_no = 0  # times the "no" answers were withdrawn this task
+        self._withdrawal = AnswerWithdrawal(cfg)  # asking.withdraw_yes_s, asking.withdraw_no_s
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
@@ -262,8 +260,7 @@ class Controller:
             raise ValueError("the third answer is off (asking.third_answer)")
         self._belief = self._model.update_answer(self._belief, q.target, answer if answer == "other" else
                                                  answer in (True, "yes"))
-        self._against_yes.clear()
-        self._against_no.clear()
+        self._withdrawal.answered()
         self._question = None
         self.drop_plan()
         return q
@@ -350,7 +347,7 @@ class Controller:
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
         self._opposition.clear()
-        self._clear_withdrawals()
+        self._withdrawal.reset()
         self._yield = None
         self._safety.restart()
 
@@ -375,7 +372,7 @@ class Controller:
         self._belief = self._model.initial_belief(goals)
         self._asked.clear()
         self._question = None
-        self._clear_withdrawals()
+        self._withdrawal.reset()
         self.drop_plan()
 
     def reconfigure(self, cfg: Config) -> None:
@@ -387,10 +384,7 @@ class Controller:
         self._axes_out = np.zeros(3)  # a new filter starts at rest, as at start-up
         if cfg.blend.opposition_window_s != self._opposition.window_s:
             self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
-        if cfg.asking.withdraw_yes_s != self._against_yes.window_s:
-            self._against_yes = OppositionWindow(cfg.asking.withdraw_yes_s)
-        if cfg.asking.withdraw_no_s != self._against_no.window_s:
-            self._against_no = OppositionWindow(cfg.asking.withdraw_no_s)
+        self._withdrawal.reconfigure(cfg)
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""
@@ -437,48 +431,20 @@ class Controller:
     def yes_withdrawn(self) -> int:
         """How many "yes" answers this task were withdrawn because the user kept opposing the assistance
         (``asking.withdraw_yes_s``)."""
-        return self._withdrawn
+        return self._withdrawal.yes_withdrawn
 
     @property
     def no_withdrawn(self) -> int:
-        """How many times this task the "no" answers were withdrawn because the user kept opposing the
-        assistance (``asking.withdraw_no_s``)."""
-        return self._withdrawn_no
-
-    def _clear_withdrawals(self) -> None:
-        """A new task or scene: both opposition windows empty, no answer withdrawn yet."""
-        self._against_yes.clear()
-        self._against_no.clear()
-        self._withdrawn = 0
-        self._withdrawn_no = 0
+        """How many times this task the "no" answers were withdrawn so (``asking.withdraw_no_s``)."""
+        return self._withdrawal.no_withdrawn
 
     def _withdraw_answers_if_opposed(self, t: float, cmd: Command, has_input: bool) -> None:
-        """``asking.withdraw_yes_s`` and ``asking.withdraw_no_s`` (both off by default): while a "yes" holds
-        (else while a "no" does) and the arm assists, count the periods with input that oppose it; once
-        they are ``blend.opposition_share`` of the window, the yes is withdrawn
-        (:meth:`~..model.belief.Belief.without_confirmation`), or the no answers are
-        (:meth:`~..model.belief.Belief.without_denials`), and the plan dropped."""
-        b, a = self._belief, self._cfg.asking
-        if b.confirmed is not None:
-            window, seconds = self._against_yes, a.withdraw_yes_s
-        elif b.ruled_out:
-            window, seconds = self._against_no, a.withdraw_no_s
-        else:
-            return
-        if seconds <= 0.0:
-            return
-        if has_input and cmd.action.kind in (ActionKind.MOVE, ActionKind.HO):
-            window.add(t, bool(cmd.opposed))
-        if not user_opposes(window, t, self._cfg.blend.opposition_share):
-            return
-        window.clear()
-        if b.confirmed is not None:
-            self._belief = b.without_confirmation()
-            self._withdrawn += 1
-        else:
-            self._belief = b.without_denials()
-            self._withdrawn_no += 1
-        self.drop_plan()
+        """A standing answer withdrawn once the user has kept opposing the assistance (``control/withdrawal.py``);
+        the plan is then dropped, so the next one uses the belief without it."""
+        assisting = has_input and cmd.action.kind in (ActionKind.MOVE, ActionKind.HO)
+        if (b := self._withdrawal.step(self._belief, t, assisting, bool(cmd.opposed))) is not None:
+            self._belief = b
+            self.drop_plan()
 
     def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
         """The paper's future work (section VI-E.4), both off by default: see :attr:`yielding`."""
