@@ -611,11 +611,11 @@ class AskingConfig(_Section):
         "arm on the wrong target; 0 = a yes is final (our reading of section III-B; docs/model.md)",
     )
     withdraw_no_s: float = Field(
-        0.0, ge=0, le=30,
+        2.0, ge=0, le=30,
         description='the "no" answers stop being final once, with no "yes" holding, the user has opposed the '
         "assistance in blend.opposition_share of the control periods with input over this window (s): a "
-        "misheard or mistaken no about the person's goal no longer keeps the arm from it; 0 = a no is final "
-        "(our reading; docs/model.md)",
+        "misheard or mistaken no about the person's goal no longer keeps the arm from it; 2 s by default since "
+        "session 28 (chosen by a rule written before its run; docs/model.md), 0 = a no is final (our reading)",
     )
     answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
         ("button", "command", "voice"),

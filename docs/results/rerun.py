@@ -35,6 +35,7 @@ BEFORE_THE_KEY = {
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
+    "asking": {"withdraw_no_s": 0.0},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
@@ -42,7 +43,8 @@ move-generator HO the defaults, and a question's time 2.5 s; session 10 HO follo
 in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s never binds). A file without
 ``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``; one
 without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone; one without
-``intent.turn_charge`` (session 22) charged a turn nothing. The ``-turn-charge`` files (session 22) measured
+``intent.turn_charge`` (session 22) charged a turn nothing; one without ``asking.withdraw_no_s`` (session 28)
+held every "no" final. The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 
