@@ -1,4 +1,5 @@
-"""Session 19's adoption rule as ``docs/results/adopt.py`` checks it, on small synthetic suites."""
+"""The adoption rules as ``docs/results/adopt.py`` checks them (session 19's, and session 28's two forms), on small
+synthetic suites."""
 
 from __future__ import annotations
 
@@ -71,3 +72,38 @@ def test_more_slower_cells_than_faster_fails(adopt):
     assert _verdict(adopt, BASE, slower) == ["(c) policy: 1 cells slower, 0 faster"]
     within = {**up, ("scene1", "cup", "policy", "u1"): (10, 10.4, 0.9)}
     assert _verdict(adopt, BASE, within) == []
+
+
+def _flips(adopt, old: dict, new: dict, n: int):
+    return adopt.prediction_flips(_suite(new, n), _suite(old, n))
+
+
+def test_s28b_fails_a_task_only_when_its_lost_predictions_are_significant(adopt):
+    """Session 28's second form: an exact one-sided McNemar test per task on the paired correct predictions
+    (``_suite`` marks the first ``round(rate n)`` seeds correct, so a fall of k loses exactly k pairs)."""
+    n = 20
+    old = {("scene2", "drill", "policy", "u1"): (n, 20.0, 1.0)}
+    lost4 = {("scene2", "drill", "policy", "u1"): (n, 20.0, 0.8)}
+    lost5 = {("scene2", "drill", "policy", "u1"): (n, 20.0, 0.75)}
+    (l4, g4, p4), = _flips(adopt, old, lost4, n).values()
+    assert (l4, g4) == (4, 0) and p4 == pytest.approx(1 / 16)  # 0.0625: not below 0.05
+    (l5, g5, p5), = _flips(adopt, old, lost5, n).values()
+    assert (l5, g5) == (5, 0) and p5 == pytest.approx(1 / 32)
+    rows = adopt.task_rows(_suite(lost5, n), _suite(old, n))
+    cells = adopt.cell_changes(_suite(lost5, n), _suite(old, n))
+    assert adopt.judge(rows, cells, flips=_flips(adopt, old, lost4, n)) == []
+    assert adopt.judge(rows, cells, flips=_flips(adopt, old, lost5, n)) == [
+        "(a'') scene2 drill: correct predictions lost 5, gained 0 (p = 0.031)"]
+
+
+def test_s28_needs_the_log_p_shown_within_the_margin(adopt):
+    """Session 28's first form: the lower end of the paired mean log p's 95 % interval above -0.1."""
+    def suite(ps: list[float]) -> dict:
+        return {"trials": [{"scene": "s", "task": "t", "method": "policy", "user": "u", "seed": i,
+                            "final_target_p": p} for i, p in enumerate(ps)]}
+    same = adopt.logp_changes(suite([0.9] * 40), suite([0.9] * 40))
+    assert same[("s", "t")] == (0.0, 0.0, 0.0) and adopt.judge([], {}, logp=same) == []
+    noisy = adopt.logp_changes(suite([0.99, 0.001] * 20), suite([0.001, 0.99] * 20))  # mean 0, wide
+    m, lo, hi = noisy[("s", "t")]
+    assert m == pytest.approx(0.0, abs=1e-12) and lo < -0.1 < 0.1 < hi
+    assert adopt.judge([], {}, logp=noisy) == [f"(a') s t: log p {m:+.3f} [{lo:+.3f}, {hi:+.3f}]"]
