@@ -39,7 +39,7 @@ from pathlib import Path
 
 from report import verdicts
 
-from sa_daemon.sim.evaluate import summarise
+from sa_daemon.sim.evaluate import summarise, trial_key
 
 HERE = Path(__file__).resolve().parent
 RULE_SUITES = ("table1", "study-simple", "fig7")
@@ -95,18 +95,22 @@ def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
     return out
 
 
+def _policy_pairs(new: dict, old: dict, field: str):
+    """The policy's trials of ``new`` paired with ``old``'s of the same scene, task, user and seed: yields
+    ``((scene, task), new value, old value)`` of ``field``."""
+    before = {trial_key(t): t[field] for t in old["trials"]}
+    for t in new["trials"]:
+        o = before.get(trial_key(t))
+        if t["method"] == "policy" and o is not None:
+            yield (t["scene"], t["task"]), t[field], o
+
+
 def logp_changes(new: dict, old: dict) -> dict[tuple[str, str], tuple[float, float, float]]:
     """Per (scene, task), the policy's paired change of the end-of-trial log p(true target): ``(mean, low,
     high)`` of option minus default over the trials of the same user and seed, the 95 % normal interval."""
-    key = ("scene", "task", "method", "user", "seed")
-    before = {tuple(t[k] for k in key): t["final_target_p"] for t in old["trials"]}
     diffs: dict[tuple[str, str], list[float]] = {}
-    for t in new["trials"]:
-        o = before.get(tuple(t[k] for k in key))
-        if t["method"] != "policy" or o is None:
-            continue
-        diffs.setdefault((t["scene"], t["task"]), []).append(
-            math.log(max(t["final_target_p"], P_FLOOR)) - math.log(max(o, P_FLOOR)))
+    for task, p_new, p_old in _policy_pairs(new, old, "final_target_p"):
+        diffs.setdefault(task, []).append(math.log(max(p_new, P_FLOOR)) - math.log(max(p_old, P_FLOOR)))
     out = {}
     for k, d in diffs.items():
         m = sum(d) / len(d)
@@ -119,16 +123,11 @@ def prediction_flips(new: dict, old: dict) -> dict[tuple[str, str], tuple[int, i
     """Per (scene, task), the policy's discordant pairs of correct prediction (same user and seed): ``(lost,
     gained, p)``, lost = right under the default and wrong under the option, p the exact one-sided
     McNemar p-value of that many losses or more among the discordant pairs."""
-    key = ("scene", "task", "method", "user", "seed")
-    before = {tuple(t[k] for k in key): t["correct_prediction"] for t in old["trials"]}
     flips: dict[tuple[str, str], list[int]] = {}
-    for t in new["trials"]:
-        o = before.get(tuple(t[k] for k in key))
-        if t["method"] != "policy" or o is None:
-            continue
-        f = flips.setdefault((t["scene"], t["task"]), [0, 0])
-        f[0] += bool(o) and not t["correct_prediction"]
-        f[1] += (not o) and bool(t["correct_prediction"])
+    for task, right_new, right_old in _policy_pairs(new, old, "correct_prediction"):
+        f = flips.setdefault(task, [0, 0])
+        f[0] += bool(right_old) and not right_new
+        f[1] += (not right_old) and bool(right_new)
     out = {}
     for k, (lost, gained) in flips.items():
         n = lost + gained

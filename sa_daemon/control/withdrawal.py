@@ -59,8 +59,8 @@ class AnswerWithdrawal:
         "yes" holds (else while a "no" does) the period is counted in that answer's window; returns the
         belief with the answer withdrawn (:meth:`~..model.belief.Belief.without_confirmation`, or
         :meth:`~..model.belief.Belief.without_denials`) once the window says so, else ``None``."""
-        a = self._cfg.asking
-        if belief.confirmed is not None:
+        a, yes = self._cfg.asking, belief.confirmed is not None
+        if yes:
             window, seconds = self._yes, a.withdraw_yes_s
         elif belief.ruled_out:
             window, seconds = self._no, a.withdraw_no_s
@@ -73,7 +73,7 @@ class AnswerWithdrawal:
         if not user_opposes(window, t, self._cfg.blend.opposition_share):
             return None
         window.clear()
-        if belief.confirmed is not None:
+        if yes:
             self._yes_withdrawn += 1
             return belief.without_confirmation()
         self._no_withdrawn += 1
