@@ -188,7 +188,11 @@ def main(argv: list[str] | None = None) -> int:
         if not path.exists():
             continue
         new = json.loads(path.read_text())
-        old = json.loads((args.default_dir / f"suite-{suite}-{args.default}.json").read_text())
+        old_path = args.default_dir / f"suite-{suite}-{args.default}.json"
+        if not old_path.exists():
+            print(f"{suite}: no {old_path.name} to compare with; skipped", file=sys.stderr)
+            continue
+        old = json.loads(old_path.read_text())
         rows, cells, logp = task_rows(new, old), cell_changes(new, old), logp_changes(new, old)
         flips = prediction_flips(new, old)
         for (scene, task), (lost, gained, p) in flips.items():
