@@ -108,7 +108,7 @@ def test_timeout_fails_the_trial(scene1, method):
 def test_recorded_timeline_matches_the_trial(scene1):
     cfg = _noisy()
     plans = []
-    r = run_trial(scene1, "cup:top", "ho", 0, cfg, record=True, on_plan=lambda s, res: plans.append(res))
+    r = run_trial(scene1, "cup:top", "ho", 0, cfg, record=True, on_plan=lambda _t, s, res: plans.append(res))
     tl = r.timeline
     assert tl is not None
     n = len(tl.t)

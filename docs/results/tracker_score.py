@@ -34,7 +34,7 @@ def score_trial(job: tuple[str, str, str, str, int]) -> tuple[str, float, float,
     cfg = load_user(user).apply(load_config(None if config == "-" else config))
     rows: list[tuple[float, bool]] = []
 
-    def on_plan(snap, _result) -> None:
+    def on_plan(_t, snap, _result) -> None:
         tp = snap.goals.target_probabilities(snap.probs)
         rows.append((float(np.log(max(tp[task], 1e-6))), max(tp, key=tp.get) == task))
 

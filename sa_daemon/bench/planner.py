@@ -42,7 +42,7 @@ def sample_snapshots(scene: Scene, cfg: Config, samples: int) -> list[Snapshot]:
     snaps: list[Snapshot] = []
     for task in scene.targets:
         for method in ("ho", "policy"):
-            run_trial(scene, task, method, 0, cfg, on_plan=lambda s, _r: snaps.append(s))
+            run_trial(scene, task, method, 0, cfg, on_plan=lambda _t, s, _r: snaps.append(s))
     idx = np.linspace(0, len(snaps) - 1, min(samples, len(snaps))).round().astype(int)
     return [dataclasses.replace(snaps[i], method="policy") for i in idx]
 

@@ -174,9 +174,10 @@ def run_trial(
     record: bool = False,
     pose_choice: str | None = None,
     user_name: str = "calibrated",
-    on_plan: Callable[[Snapshot, PlanResult], None] | None = None,
+    on_plan: Callable[[float, Snapshot, PlanResult], None] | None = None,
 ) -> TrialResult:
-    """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``."""
+    """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``.
+    ``on_plan(t, snapshot, result)`` sees every plan, ``t`` the trial's time in s."""
     rng = np.random.default_rng(seed)
     arm = arm_factory(scene, cfg)
     if arm.kinematics is not None:  # an arm with joints: only the poses it can reach (arm/reach.py)
@@ -220,7 +221,7 @@ def run_trial(
                 result = solver.plan(snap)
                 plans += 1
                 if on_plan is not None:
-                    on_plan(snap, result)
+                    on_plan(t, snap, result)
                 if t < EARLY_S:
                     kind = result.action.kind.value
                     early[kind] = early.get(kind, 0) + 1
