@@ -1,4 +1,4 @@
-"""The adoption rules as ``docs/results/adopt.py`` checks them (session 19's, and session 28's two forms), on small
+"""The adoption rules as ``docs/results/adopt.py`` checks them (session 19's, session 28's two forms and session 29's), on small
 synthetic suites."""
 
 from __future__ import annotations
@@ -107,3 +107,26 @@ def test_s28_needs_the_log_p_shown_within_the_margin(adopt):
     m, lo, hi = noisy[("s", "t")]
     assert m == pytest.approx(0.0, abs=1e-12) and lo < -0.1 < 0.1 < hi
     assert adopt.judge([], {}, logp=noisy) == [f"(a') s t: log p {m:+.3f} [{lo:+.3f}, {hi:+.3f}]"]
+
+
+def test_s29_judges_lost_successes_by_a_paired_test_per_task_and_pooled(adopt):
+    """Session 29's form: (b') an exact one-sided McNemar test on the paired successes of each (task,
+    method), and of all of them pooled, in place of (b)'s count (``_suite`` fails the last seeds, so a fall
+    of k successes loses exactly k pairs)."""
+    n = 20
+    old = {("scene1", "cup", "policy", "u1"): (n, 10.0, 1.0), ("scene1", "bowl", "ho", "u1"): (n, 10.0, 1.0)}
+
+    def verdict(new: dict) -> list[str]:
+        a, b = _suite(new, n), _suite(old, n)
+        return adopt.judge(adopt.task_rows(a, b), adopt.cell_changes(a, b), flips=adopt.prediction_flips(a, b),
+                           successes=adopt.success_flips(a, b))
+
+    assert verdict({**old, ("scene1", "cup", "policy", "u1"): (n - 3, 10.0, 1.0)}) == []  # (b) alone: off
+    assert verdict({**old, ("scene1", "cup", "policy", "u1"): (n - 4, 10.0, 1.0)}) == []  # p = 1/16
+    assert verdict({**old, ("scene1", "cup", "policy", "u1"): (n - 5, 10.0, 1.0)}) == [
+        "(b') scene1 cup policy: successes lost 5, gained 0 (p = 0.031)",
+        "(b') pooled: successes lost 5, gained 0 (p = 0.031)"]
+    both3 = {("scene1", "cup", "policy", "u1"): (n - 3, 10.0, 1.0), ("scene1", "bowl", "ho", "u1"): (n - 3, 10.0, 1.0)}
+    assert verdict(both3) == ["(b') pooled: successes lost 6, gained 0 (p = 0.016)"]  # each task 0.125
+    assert adopt.mcnemar_lost(3, 0) == pytest.approx(0.125) and adopt.mcnemar_lost(0, 0) == 1.0
+    assert adopt.mcnemar_lost(3, 3) == pytest.approx(42 / 64)

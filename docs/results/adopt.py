@@ -1,6 +1,6 @@
 """Session 19's rule for adopting a model or tracker option as the default, checked on suite files.
 
-    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28]
+    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28|s28b|s29]
 
 reads ``DIR/suite-{table1,study-simple,fig7}-TAG.json`` (the option's runs, ``DIR`` defaults to this folder)
 and ``DEFAULT_DIR/suite-{...}-marginal.json`` (the default's, this folder unless told), paired by (scene,
@@ -25,6 +25,12 @@ confirmatory run on fresh seeds"): (b) and (c) as above, and in place of (a)
 (a'') on no task has the policy fewer correct predictions (the paper's measure) than the default by an
       exact one-sided McNemar test at p < 0.05 (pairs: same user and seed), no correction for the tasks.
 
+``--rule s29`` is s28b with (b) replaced, after (b) rejected a candidate on noise (``docs/model.md``, "Session
+29's form"):
+
+(b') no (task, method) has fewer successes than the default by an exact one-sided McNemar test at p < 0.05
+     (pairs: same user and seed), and neither have all the (task, method) pairs of the three suites pooled.
+
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
 """
@@ -48,7 +54,7 @@ MAX_LOST = 2          # (b): successes a (task, method) may lose
 P_FLOOR = 1e-6        # (a'): the floor of p(true target) before its log
 Z95 = 1.96            # (a'): the normal interval's half-width in standard errors
 MARGIN = 0.1          # (a'): the non-inferiority margin of the mean log p (nats)
-ALPHA = 0.05          # (a''): the one-sided McNemar test's level
+ALPHA = 0.05          # (a''), (b'): the one-sided McNemar tests' level
 PREDICTION = 0.9      # (a): the prediction floor
 CELL_CHANGE = 0.05    # (c): a cell is faster / slower beyond this fraction of its old time
 
@@ -95,14 +101,46 @@ def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
     return out
 
 
-def _policy_pairs(new: dict, old: dict, field: str):
-    """The policy's trials of ``new`` paired with ``old``'s of the same scene, task, user and seed: yields
-    ``((scene, task), new value, old value)`` of ``field``."""
+def _pairs(new: dict, old: dict, field: str):
+    """The trials of ``new`` paired with ``old``'s of the same scene, task, method, user and seed: yields
+    ``((scene, task, method), new value, old value)`` of ``field``."""
     before = {trial_key(t): t[field] for t in old["trials"]}
     for t in new["trials"]:
         o = before.get(trial_key(t))
-        if t["method"] == "policy" and o is not None:
-            yield (t["scene"], t["task"]), t[field], o
+        if o is not None:
+            yield (t["scene"], t["task"], t["method"]), t[field], o
+
+
+def _policy_pairs(new: dict, old: dict, field: str):
+    """:func:`_pairs` of the policy's trials, keyed ``(scene, task)``."""
+    for (scene, task, method), n, o in _pairs(new, old, field):
+        if method == "policy":
+            yield (scene, task), n, o
+
+
+def mcnemar_lost(lost: int, gained: int) -> float:
+    """The exact one-sided McNemar p-value of ``lost`` or more losses among ``lost + gained`` discordant
+    pairs (1 with none)."""
+    n = lost + gained
+    return sum(math.comb(n, i) for i in range(lost, n + 1)) / 2 ** n if n else 1.0
+
+
+def _flip_counts(pairs) -> dict:
+    """Per key, ``[lost, gained]``: pairs right (true) under the default and wrong under the option, and the
+    reverse."""
+    flips: dict = {}
+    for key, right_new, right_old in pairs:
+        f = flips.setdefault(key, [0, 0])
+        f[0] += bool(right_old) and not right_new
+        f[1] += (not right_old) and bool(right_new)
+    return flips
+
+
+def success_flips(new: dict, old: dict) -> dict[tuple[str, str, str], tuple[int, int, float]]:
+    """Per (scene, task, method), the discordant pairs of success (same user and seed): ``(lost, gained,
+    p)``, p the exact one-sided McNemar p-value (:func:`mcnemar_lost`); rule s29's (b')."""
+    return {k: (lost, gained, mcnemar_lost(lost, gained))
+            for k, (lost, gained) in _flip_counts(_pairs(new, old, "success")).items()}
 
 
 def logp_changes(new: dict, old: dict) -> dict[tuple[str, str], tuple[float, float, float]]:
@@ -123,27 +161,29 @@ def prediction_flips(new: dict, old: dict) -> dict[tuple[str, str], tuple[int, i
     """Per (scene, task), the policy's discordant pairs of correct prediction (same user and seed): ``(lost,
     gained, p)``, lost = right under the default and wrong under the option, p the exact one-sided
     McNemar p-value of that many losses or more among the discordant pairs."""
-    flips: dict[tuple[str, str], list[int]] = {}
-    for task, right_new, right_old in _policy_pairs(new, old, "correct_prediction"):
-        f = flips.setdefault(task, [0, 0])
-        f[0] += bool(right_old) and not right_new
-        f[1] += (not right_old) and bool(right_new)
-    out = {}
-    for k, (lost, gained) in flips.items():
-        n = lost + gained
-        out[k] = (lost, gained, sum(math.comb(n, i) for i in range(lost, n + 1)) / 2 ** n if n else 1.0)
-    return out
+    return {k: (lost, gained, mcnemar_lost(lost, gained))
+            for k, (lost, gained) in _flip_counts(_policy_pairs(new, old, "correct_prediction")).items()}
 
 
 def judge(rows: list[dict], cells: dict[str, list[int]],
           logp: dict[tuple[str, str], tuple[float, float, float]] | None = None,
-          flips: dict[tuple[str, str], tuple[int, int, float]] | None = None) -> list[str]:
+          flips: dict[tuple[str, str], tuple[int, int, float]] | None = None,
+          successes: dict[tuple[str, str, str], tuple[int, int, float]] | None = None) -> list[str]:
     """The rule's failures, one line each (an empty list: adopt). With ``logp`` (session 28's rule) or
-    ``flips`` (its second form) part (a) is that paired test instead of the prediction rates."""
+    ``flips`` (its second form) part (a) is that paired test instead of the prediction rates; with
+    ``successes`` (session 29's form) part (b) is the paired test of :func:`success_flips`, per (task,
+    method) and pooled, instead of the count."""
     fails = []
+    if successes is not None:
+        for (scene, task, method), (lost, gained, p) in successes.items():
+            if p < ALPHA:
+                fails.append(f"(b') {scene} {task} {method}: successes lost {lost}, gained {gained} (p = {p:.3f})")
+        lost, gained = (sum(v[i] for v in successes.values()) for i in (0, 1))
+        if mcnemar_lost(lost, gained) < ALPHA:
+            fails.append(f"(b') pooled: successes lost {lost}, gained {gained} (p = {mcnemar_lost(lost, gained):.3f})")
     for r in rows:
         (so, sn), (po, pn) = r["successes"], r["prediction"]
-        if so is not None and sn < so - MAX_LOST:
+        if successes is None and so is not None and sn < so - MAX_LOST:
             fails.append(f"(b) {r['task']} {r['method']}: {so} -> {sn} successes")
         if logp is None and flips is None and r["method"] == "policy" and po is not None and pn is not None and po >= PREDICTION > pn:
             fails.append(f"(a) {r['task']}: prediction {po:.2f} -> {pn:.2f}")
@@ -175,12 +215,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
     ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
-    ap.add_argument("--rule", choices=("s19", "s28", "s28b"), default="s19",
-                    help="s19: session 19's rule; s28, s28b: session 28's, for options that leave the tracker")
+    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29"), default="s19",
+                    help="s19: session 19's rule; s28, s28b, s29: for options that leave the tracker")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
     judged_logp: dict[tuple[str, str], tuple[float, float, float]] = {}
     judged_flips: dict[tuple[str, str], tuple[int, int, float]] = {}
+    judged_successes: dict[tuple[str, str, str], tuple[int, int, float]] = {}
     judged_cells: dict[str, list[int]] = {}
     lines = ["| suite | task | method | successes | time s | prediction | questions |", "|" + "---|" * 7]
     for suite in ALL_SUITES:
@@ -194,7 +235,10 @@ def main(argv: list[str] | None = None) -> int:
             continue
         old = json.loads(old_path.read_text())
         rows, cells, logp = task_rows(new, old), cell_changes(new, old), logp_changes(new, old)
-        flips = prediction_flips(new, old)
+        flips, successes = prediction_flips(new, old), success_flips(new, old)
+        for (scene, task, method), (lost, gained, p) in successes.items():
+            if lost or gained:
+                print(f"{suite} {scene} {task} {method}: successes lost {lost}, gained {gained}, McNemar p {p:.3f}")
         for (scene, task), (lost, gained, p) in flips.items():
             print(f"{suite} {scene} {task}: policy correct predictions lost {lost}, gained {gained}, McNemar p {p:.3f}")
         for (scene, task), (m, lo, hi) in logp.items():
@@ -212,6 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             judged_rows += rows
             judged_logp.update(logp)
             judged_flips.update(flips)
+            judged_successes.update(successes)
             for m, (f, s) in cells.items():
                 judged_cells.setdefault(m, [0, 0])
                 judged_cells[m][0] += f
@@ -221,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print("\n" + "\n".join(lines) + "\n")
     fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None,
-                  judged_flips if args.rule == "s28b" else None)
+                  judged_flips if args.rule in ("s28b", "s29") else None,
+                  judged_successes if args.rule == "s29" else None)
     print(f"Rule {args.rule}: " + ("adopt" if not fails else "off"))
     for f in fails:
         print("  " + f)
