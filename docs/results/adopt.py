@@ -179,8 +179,8 @@ def judge(rows: list[dict], cells: dict[str, list[int]],
             if p < ALPHA:
                 fails.append(f"(b') {scene} {task} {method}: successes lost {lost}, gained {gained} (p = {p:.3f})")
         lost, gained = (sum(v[i] for v in successes.values()) for i in (0, 1))
-        if mcnemar_lost(lost, gained) < ALPHA:
-            fails.append(f"(b') pooled: successes lost {lost}, gained {gained} (p = {mcnemar_lost(lost, gained):.3f})")
+        if (p_pooled := mcnemar_lost(lost, gained)) < ALPHA:
+            fails.append(f"(b') pooled: successes lost {lost}, gained {gained} (p = {p_pooled:.3f})")
     for r in rows:
         (so, sn), (po, pn) = r["successes"], r["prediction"]
         if successes is None and so is not None and sn < so - MAX_LOST:
