@@ -93,6 +93,13 @@ class IntentConfig(_Section):
         "times exp(-V) at the gripper; docs/model.md, One grasp pose for HO, the moves and the rollouts); "
         "tracked_moves = that pose for the moves and the rollouts, HO keeping the paper's lowest-value poses",
     )
+    copy_reach: Literal["own", "target", "likeliest"] = Field(
+        "own",
+        description="which k_c the copies resampling makes of one target (section III-G) are driven to and "
+        "scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of its "
+        "own, the default); target = the closest over all the target's poses; likeliest = the k_c of the "
+        "target's most probable copy (docs/model.md, Copies that share one k_c)",
+    )
     copy_weights: Literal["equal", "poses"] = Field(
         "equal",
         description="a target's probability over the copies resampling makes of it (section III-G): equal = "

@@ -69,7 +69,7 @@ class SharedAutonomyModel:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
         ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them."""
         if desired is None:
-            desired = goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+            desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
         dist = np.linalg.norm(kp - pose.position, axis=-1)
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
@@ -144,6 +144,21 @@ class SharedAutonomyModel:
 
     # -- velocity commands ---------------------------------------------------------------------------------
 
+    def desired_poses(self, goals: GoalSet, pose: Pose,
+                      probs: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """``k_c`` of every goal at ``pose``, ``((G, 3), (G, 4))``, as ``intent.copy_reach`` shares it among the
+        copies of one target (:meth:`GoalSet.desired_poses`): ``own`` each copy its own; ``target`` the
+        closest over all the target's poses; ``likeliest`` the ``k_c`` of the target's most probable copy
+        (``probs``, ``(G,)``; ties and ``None``: the first copy)."""
+        w = self.cfg.intent.rotation_weight_m_per_rad
+        share = self.cfg.intent.copy_reach
+        if share == "own":
+            return goals.desired_poses(pose, w)
+        if share == "target":
+            return goals.desired_poses(pose, w, goals.desired_distances(pose, w))
+        score = -np.asarray(probs, dtype=float) if probs is not None else np.zeros(len(goals))
+        return goals.desired_poses(pose, w, score)
+
     def reach_poses(self, goals: GoalSet, pose: Pose,
                     pose_log_w: FloatArray | None = None) -> tuple[FloatArray, FloatArray] | None:
         """The grasp pose each goal is driven to and scored at, ``((G, 3), (G, 4))``, when
@@ -170,7 +185,7 @@ class SharedAutonomyModel:
         if action.kind is ActionKind.MOVE:
             if action.goal is None or not 0 <= action.goal < len(goals):
                 raise ValueError(f"move action needs a goal index in range, got {action.goal}")
-            kp, kq = reach or goals.desired_poses(pose, self.cfg.intent.rotation_weight_m_per_rad)
+            kp, kq = reach or self.desired_poses(goals, pose, probs)
             return move_twist(pose.position, pose.quat_wxyz, kp[action.goal], kq[action.goal], self.cfg.move)
         if action.kind is ActionKind.HO:
             if self.cfg.intent.reach_pose == "tracked_moves":

@@ -42,7 +42,7 @@ class Problem:
         goals = snap.goals
         self.b0 = snap.probs
         self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
-                            or goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad))
+                            or model.desired_poses(goals, snap.pose, snap.probs))
         self.moves, self.questions = model.action_set(snap.method, goals, self.b0, snap.pose, snap.asked)
         self.u = snap.user_twist
         self.H = cfg.reward.lookahead_steps

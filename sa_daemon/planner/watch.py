@@ -110,7 +110,7 @@ class WatchSearch:
         goals = snap.goals
         self.b0 = snap.probs
         self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
-                            or goals.desired_poses(snap.pose, cfg.intent.rotation_weight_m_per_rad))
+                            or model.desired_poses(goals, snap.pose, snap.probs))
         self.pregrasp = pregrasp_points(self.kp, self.kq, cfg.intent.user_standoff_m)
         cands = model.candidate_goals(goals, self.b0, snap.pose, (self.kp, self.kq))
         self.moves, self.questions = model.actions_for(snap.method, goals, cands, snap.asked)

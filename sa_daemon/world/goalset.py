@@ -78,17 +78,33 @@ class GoalSet:
             return np.zeros(len(self.goals), dtype=bool)
         return self.target_index == self.targets.index(target)
 
+    def _pose_distances(self, pose: Pose, rotation_weight_m_per_rad: float) -> FloatArray:
+        """``(G, K)``: ``d_trans + w d_rot`` (m) from ``pose`` to every grasp pose (padding 1 km away)."""
+        d = np.linalg.norm(self.positions - pose.position, axis=-1)
+        return d + rotation_weight_m_per_rad * quat_angle(self.quats_wxyz, pose.quat_wxyz)
+
     def desired_indices(self, pose: Pose, rotation_weight_m_per_rad: float) -> np.ndarray:
         """Index of ``k_c`` (closest grasp pose, ``d_trans + w d_rot``) within each goal, ``(G,)``."""
-        d = np.linalg.norm(self.positions - pose.position, axis=-1)
-        d = d + rotation_weight_m_per_rad * quat_angle(self.quats_wxyz, pose.quat_wxyz)
-        return np.argmin(d, axis=-1)
+        return np.argmin(self._pose_distances(pose, rotation_weight_m_per_rad), axis=-1)
 
-    def desired_poses(self, pose: Pose, rotation_weight_m_per_rad: float) -> tuple[FloatArray, FloatArray]:
-        """``k_c`` of every goal as arrays ``((G, 3), (G, 4))``."""
+    def desired_poses(self, pose: Pose, rotation_weight_m_per_rad: float,
+                      lender_score: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """``k_c`` of every goal as arrays ``((G, 3), (G, 4))``.
+
+        ``lender_score`` ``(G,)``: the copies resampling made of one high-level target all take the ``k_c`` of
+        the copy with the lowest score (``intent.copy_reach``); ``None``: each goal its own."""
         k = self.desired_indices(pose, rotation_weight_m_per_rad)
         rows = np.arange(len(self.goals))
+        if lender_score is not None:
+            owner = rows.copy()
+            for members in (np.flatnonzero(self.target_index == t) for t in range(len(self.targets))):
+                owner[members] = members[np.argmin(np.asarray(lender_score)[members])]
+            rows, k = owner, k[owner]
         return self.positions[rows, k], self.quats_wxyz[rows, k]
+
+    def desired_distances(self, pose: Pose, rotation_weight_m_per_rad: float) -> FloatArray:
+        """``(G,)``: ``d_trans + w d_rot`` (m) from ``pose`` to each goal's ``k_c``."""
+        return np.min(self._pose_distances(pose, rotation_weight_m_per_rad), axis=-1)
 
     def target_probabilities(self, probs: FloatArray) -> dict[str, float]:
         """Probability of each high-level target (summed over its copies)."""
