@@ -223,6 +223,13 @@ class PlannerConfig(_Section):
     watch_moves: int = Field(
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
+    watch_likelihood: Literal["kc", "marginal"] = Field(
+        "kc",
+        description="watch model: how a rollout reads the input it predicts for a user heading to a goal. kc: "
+        "MaxEnt IOC against each goal's k_c alone; marginal: the tracker's own likelihood (intent.poses = "
+        "marginal), each goal's grasp poses summed with weights exp(-V), so copies of one target that the "
+        "tracker cannot tell apart are not expected to part (docs/model.md)",
+    )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(
         0, ge=0, le=64,

@@ -238,6 +238,31 @@ def q_minus_v_driven(
     return out
 
 
+def marginal_nll_driven(
+    position: FloatArray, quat: FloatArray, user_linear: FloatArray | None, user_angular: FloatArray | None,
+    goal_positions: FloatArray, goal_quats: FloatArray, cfg: IntentConfig, anchor: FloatArray | None = None,
+) -> FloatArray:
+    """:func:`marginal_nll` for a batch of poses ``(..., 3)``/``(..., 4)`` and an input that drives one part
+    (:func:`q_minus_v_driven`'s arguments): ``-log sum_k w_k exp(-beta (Q_k - V_k))`` (nats per input
+    sample), ``w_k`` each goal's ``exp(-V_k)`` normalised over its poses ``(G, K, ...)`` at the pose.
+    Shape ``(..., G)``. The tracker's likelihood (``intent.poses = "marginal"``), as the watch model's
+    rollouts read the input they predict under ``planner.watch_likelihood = "marginal"``."""
+    G, K = goal_positions.shape[:2]
+    flat_p, flat_q = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
+    per = cfg.rationality * q_minus_v_driven(position, quat, user_linear, user_angular, flat_p, flat_q, cfg,
+                                             cfg.rotation_scale, anchor)
+    d_t = norms(flat_p - np.asarray(position)[..., None, :])
+    d_r = quat_angle(flat_q, np.asarray(quat)[..., None, :])
+    v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
+    shape = v.shape[:-1] + (G, K)
+    v, per = v.reshape(shape), per.reshape(per.shape[:-1] + (G, K))
+    v = v - v.min(axis=-1, keepdims=True)
+    log_w = -v - np.log(np.sum(np.exp(-v), axis=-1, keepdims=True))
+    m = log_w - per
+    top = m.max(axis=-1)
+    return -(top + np.log(np.sum(np.exp(m - top[..., None]), axis=-1)))
+
+
 def assistance_twists(
     position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
     intent: IntentConfig, ho: HOConfig,

@@ -47,7 +47,7 @@ import numpy as np
 from ..config import Config
 from ..geometry import FloatArray, norms, quat_angle, turn
 from ..model.actions import Action, ActionKind, Mode
-from ..model.huber import pregrasp_points, q_minus_v_driven
+from ..model.huber import marginal_nll_driven, pregrasp_points, q_minus_v_driven
 from ..model.reward import approach_return, distance_reward, opposes
 from ..model.twists import (
     assisted_speeds,
@@ -74,6 +74,11 @@ class Rollouts:
     ``anchor``: where the user last translated (m, :attr:`~..model.belief.Belief.anchor`), from which the
     tracker measures a turn's charge (``intent.turn_charge``); the predicted user of a rollout drives the
     mode's part alone, so turning it never moves (``None``: the first start's position).
+    ``poses``: every goal's grasp poses ``((G, K, 3), (G, K, 4))`` (padded, ``GoalSet``): ``loglik`` is then
+    the tracker's marginal over them (:func:`~..model.huber.marginal_nll_driven`, ``planner.watch_likelihood
+    = "marginal"``) instead of MaxEnt IOC against ``kp``/``kq``; the compiled form takes it for a watch of
+    one step (the default ``watch_s = rollout_step_s``: the input read at the start pose,
+    :meth:`_start_marginal`), the numpy form for any.
     ``background``: the compiled form is only started on the rollout threads, and the caller runs other
     Python meanwhile; the arrays are ready after :meth:`join` (or not to be read after :meth:`cancel`).
     """
@@ -84,15 +89,18 @@ class Rollouts:
                  kp: FloatArray, kq: FloatArray, actions: list[Action], mode: Mode, speed: tuple[float, float],
                  steps: int, dt: float, watch_steps: int = 0, compiled: bool | None = None,
                  pregrasp: FloatArray | None = None, background: bool = False,
-                 anchor: FloatArray | None = None) -> None:
-        if compiled is None:
-            compiled = kernel.supported(cfg)
+                 anchor: FloatArray | None = None, poses: tuple[FloatArray, FloatArray] | None = None) -> None:
+        if compiled is None:  # the kernel reads the input against k_c; a one-step watch's marginal is cheap here
+            compiled = kernel.supported(cfg) and (poses is None or watch_steps <= 1)
         if pregrasp is None:
             pregrasp = pregrasp_points(kp, kq, cfg.intent.user_standoff_m)
         anchor = np.array(positions[0] if anchor is None else anchor, dtype=float)
         if compiled:
             self._compiled(cfg, positions, quats, weights, kp, kq, pregrasp, anchor, actions, mode, speed, steps,
                            dt, watch_steps, background)
+            if poses is not None and watch_steps:
+                self.loglik = self._start_marginal(cfg, positions, quats, kp, kq, pregrasp, anchor, poses, mode,
+                                                   speed, dt, len(actions))
             return
         C, G, A = len(positions), len(kp), len(actions)
         translating = Mode(mode) is Mode.TRANSLATION
@@ -124,7 +132,8 @@ class Rollouts:
         t_apply = cfg.intent.action_apply_time_s
         per_step = cfg.reward.opposition_penalty * dt / cfg.reward.step_s
         th = cfg.reward.opposition_threshold
-        samples = cfg.runtime.belief_hz * dt * cfg.intent.rationality
+        rate = cfg.runtime.belief_hz * dt  # input samples the tracker reads per rollout step
+        samples = rate * cfg.intent.rationality
         rot_scale = cfg.intent.rotation_scale  # the tracker's weight of the rotation part
         k = dt / cfg.reward.step_s  # paper steps per rollout step
         self.value = np.empty((C, G, A, steps + 1))
@@ -187,12 +196,14 @@ class Rollouts:
             opposed = opposes(u_lin, r_lin, th) | opposes(u_ang, r_ang, th)  # (HO's free part: no input there)
             step_penalty = np.where(opposed & ~arrived, per_step, 0.0)
             if s < watch_steps:  # only the driven part enters the likelihood: HO's is in P or Q
-                loglik -= samples * q_minus_v_driven(
-                    np.broadcast_to(P, (C, G, A, 3)) if translating else watched(P, free_part=True),
-                    np.broadcast_to(Q, (C, G, A, 4)),
-                    np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
-                    None if translating else np.broadcast_to(u_ang, (C, G, A, 3)), kp, kq, cfg.intent, rot_scale,
-                    anchor)
+                driven = (np.broadcast_to(P, (C, G, A, 3)) if translating else watched(P, free_part=True),
+                          np.broadcast_to(Q, (C, G, A, 4)),
+                          np.broadcast_to(u_lin, (C, G, A, 3)) if translating else None,
+                          None if translating else np.broadcast_to(u_ang, (C, G, A, 3)))
+                if poses is None:
+                    loglik -= samples * q_minus_v_driven(*driven, kp, kq, cfg.intent, rot_scale, anchor)
+                else:
+                    loglik -= rate * marginal_nll_driven(*driven, *poses, cfg.intent, anchor)
             P = P + t_lin * dt
             Q = turn(Q, t_ang, dt)
             if tracked:  # the user does not drive this part: HO's share of the blend alone
@@ -226,6 +237,24 @@ class Rollouts:
         self.watch_quats = np.empty((C, G, 0, 4))
         self.watch_return = np.empty((C, G, 0))
         self.loglik = np.zeros((C, G, A, 0))
+
+    @staticmethod
+    def _start_marginal(cfg: Config, positions: FloatArray, quats: FloatArray, kp: FloatArray, kq: FloatArray,
+                        pregrasp: FloatArray, anchor: FloatArray, poses: tuple[FloatArray, FloatArray], mode: Mode,
+                        speed: tuple[float, float], dt: float, A: int) -> FloatArray:
+        """``loglik`` ``(C, G, A, G)`` of a one-step watch under the tracker's marginal: at each start, the
+        input predicted for a user heading to each goal, read for one rollout step (the same for every
+        action: the arm has not moved yet)."""
+        C, G = len(positions), len(kp)
+        P = np.broadcast_to(positions[:, None, :], (C, G, 3))
+        Q = np.broadcast_to(quats[:, None, :], (C, G, 4))
+        if Mode(mode) is Mode.TRANSLATION:
+            u = user_linear(P, kp[None], pregrasp[None], speed[0], cfg.intent.user_standoff_m)
+            nll = marginal_nll_driven(P, Q, u, None, *poses, cfg.intent, anchor)
+        else:
+            nll = marginal_nll_driven(P, Q, None, user_angular(Q, kq[None], speed[1]), *poses, cfg.intent, anchor)
+        rate = cfg.runtime.belief_hz * dt
+        return np.broadcast_to((-rate * nll)[:, :, None, :], (C, G, A, G)).copy()
 
     def _compiled(self, cfg: Config, positions: FloatArray, quats: FloatArray, weights: FloatArray, kp: FloatArray,
                   kq: FloatArray, pregrasp: FloatArray, anchor: FloatArray, actions: list[Action], mode: Mode,

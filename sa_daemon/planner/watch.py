@@ -19,7 +19,9 @@ pick is credited with what it earns for ``g``; the root's value of an action is 
 commits and questions this is the usual expected value (answers are Bayes-consistent). For a watch it
 is not: ``watch`` runs the motion ``w`` for ``n_w`` steps (``planner.watch_s``) while the user heads to
 ``g``; the arm reaches ``x'_gw`` and the belief becomes ``b'_gw``: the root belief updated with the
-MaxEnt IOC likelihood of the joystick input predicted for that user - the tracker's own update. If the
+MaxEnt IOC likelihood of the joystick input predicted for that user, against each goal's ``k_c``
+(``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
+``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), weighted by ``b``
 renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
@@ -112,6 +114,7 @@ class WatchSearch:
         self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
                             or model.desired_poses(goals, snap.pose, snap.probs))
         self.pregrasp = pregrasp_points(self.kp, self.kq, cfg.intent.user_standoff_m)
+        self.poses = ((goals.positions, goals.quats_wxyz) if cfg.planner.watch_likelihood == "marginal" else None)
         cands = model.candidate_goals(goals, self.b0, snap.pose, (self.kp, self.kq))
         self.moves, self.questions = model.actions_for(snap.method, goals, cands, snap.asked)
         pc = cfg.planner
@@ -154,7 +157,7 @@ class WatchSearch:
         s = self.snap
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
                         steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background,
-                        anchor=s.anchor)
+                        anchor=s.anchor, poses=self.poses if watch_steps else None)
 
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
