@@ -98,7 +98,8 @@ class IntentConfig(_Section):
         description="which k_c the copies resampling makes of one target (section III-G) are driven to and "
         "scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of its "
         "own, the default); target = the closest over all the target's poses; likeliest = the k_c of the "
-        "target's most probable copy (docs/model.md, Copies that share one k_c)",
+        "target's most probable copy (screened in session 30 and left off; docs/model.md, Copies that share "
+        "one k_c)",
     )
     copy_weights: Literal["equal", "poses"] = Field(
         "equal",
@@ -228,7 +229,8 @@ class PlannerConfig(_Section):
         description="watch model: how a rollout reads the input it predicts for a user heading to a goal. kc: "
         "MaxEnt IOC against each goal's k_c alone; marginal: the tracker's own likelihood (intent.poses = "
         "marginal), each goal's grasp poses summed with weights exp(-V), so copies of one target that the "
-        "tracker cannot tell apart are not expected to part (docs/model.md)",
+        "tracker cannot tell apart are not expected to part (measured in session 30 and left off; "
+        "docs/model.md)",
     )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(

@@ -30,7 +30,7 @@ from sa_daemon.world.goalset import GoalSet
 from sa_daemon.world.scene import load_scene
 
 TOP = (math.pi, 0.0, 0.0)
-KC = config_from_dict({"planner": {"threads": 1}}, "test")
+KC = config_from_dict({"planner": {"threads": 1, "watch_likelihood": "kc"}}, "test")
 MARGINAL = config_from_dict({"planner": {"threads": 1, "watch_likelihood": "marginal"}}, "test")
 
 
@@ -80,8 +80,8 @@ def split_cup(turned: bool = False) -> tuple[GoalSet, np.ndarray]:
     apart, 4 cm radius), all with one orientation or (``turned``) the fingers across the rim; a bowl
     elsewhere. The belief 0.35 / 0.45 / 0.2."""
     centre = np.array([0.45, 0.05, 0.25])
-    rim = [Pose.from_rpy(centre + 0.04 * np.array([math.cos(a), math.sin(a), 0.0]), (math.pi, 0.0, a if turned else 0.0))
-           for a in np.radians(np.arange(0, 360, 30))]
+    rim = [Pose.from_rpy(centre + 0.04 * np.array([math.cos(a), math.sin(a), 0.0]),
+                         (math.pi, 0.0, a if turned else 0.0)) for a in np.radians(np.arange(0, 360, 30))]
     own = Goal("cup", GraspType.TOP, rim[:1])
     rest = Goal("cup", GraspType.TOP, tuple(rim[1:]))
     bowl = Goal("bowl", GraspType.TOP, (Pose.from_rpy([0.38, 0.30, 0.23], TOP),))

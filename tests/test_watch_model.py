@@ -206,9 +206,9 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     cfg, b0, pose = model.cfg, s.b0, snap.pose
     r_q, n_q = cfg.reward.question, s.n_q
 
-    def roll(position, quat, weights, steps, watch_steps=0):
+    def roll(position, quat, weights, steps, watch_steps=0):  # the watch read as planner.watch_likelihood says
         return Rollouts(cfg, position[None], quat[None], weights[None], s.kp, s.kq, s.moves, snap.mode,
-                        snap.user_speed, steps, s.dt, watch_steps)
+                        snap.user_speed, steps, s.dt, watch_steps, poses=s.poses if watch_steps else None)
 
     def decide(R, b, asked: frozenset, steps: int, depth: int) -> np.ndarray:
         best_e, best_v = -np.inf, None
@@ -253,7 +253,7 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
 def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, third):
     rng = np.random.default_rng(seed)
     cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
-               watch_moves=int(rng.integers(0, 3)))
+               watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2])
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
     asking = cfg.asking.model_copy(update={"third_answer": third})
     cfg = cfg.model_copy(update={"reward": reward, "asking": asking})
