@@ -208,7 +208,7 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
 
     def roll(position, quat, weights, steps, watch_steps=0):  # the watch read as planner.watch_likelihood says
         return Rollouts(cfg, position[None], quat[None], weights[None], s.kp, s.kq, s.moves, snap.mode,
-                        snap.user_speed, steps, s.dt, watch_steps, poses=s.poses if watch_steps else None)
+                        snap.user_speed, steps, s.dt, watch_steps, poses=s.poses)
 
     def decide(R, b, asked: frozenset, steps: int, depth: int) -> np.ndarray:
         best_e, best_v = -np.inf, None

@@ -173,19 +173,20 @@ def pose_log_weights(position: FloatArray, quat: FloatArray, goal_positions: Flo
                      cfg: IntentConfig, distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``log w_k``, ``w_k = exp(-V_k) / sum_j exp(-V_j)`` over each goal's poses ``(G, K, ...)`` at the
     gripper's pose, ``V`` weighed like :func:`pose_nll` (padding, far away, weighs nothing). ``(G, K)``.
-    ``distances``: :func:`pose_distances`, if the caller has them."""
+    ``distances``: :func:`pose_distances`, if the caller has them (a batch ``(..., G, K)`` each gives
+    ``(..., G, K)``)."""
     d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
     v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
-    v = v - v.min(axis=1, keepdims=True)
-    return -v - np.log(np.sum(np.exp(-v), axis=1, keepdims=True))
+    v = v - v.min(axis=-1, keepdims=True)
+    return -v - np.log(np.sum(np.exp(-v), axis=-1, keepdims=True))
 
 
 def mixture_nll(log_w: FloatArray, nll: FloatArray) -> FloatArray:
-    """``-log sum_k w_k exp(-nll_k)`` per goal from ``(G, K)`` log-weights (``-inf``: no such pose) and
-    per-pose ``nll``. Shape ``(G,)``."""
+    """``-log sum_k w_k exp(-nll_k)`` per goal from ``(..., G, K)`` log-weights (``-inf``: no such pose)
+    and per-pose ``nll``. Shape ``(..., G)``."""
     m = log_w - nll
-    top = m.max(axis=1)
-    return -(top + np.log(np.sum(np.exp(m - top[:, None]), axis=1)))
+    top = m.max(axis=-1)
+    return -(top + np.log(np.sum(np.exp(m - top[..., None]), axis=-1)))
 
 
 def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
@@ -251,16 +252,10 @@ def marginal_nll_driven(
     flat_p, flat_q = goal_positions.reshape(G * K, 3), goal_quats.reshape(G * K, 4)
     per = cfg.rationality * q_minus_v_driven(position, quat, user_linear, user_angular, flat_p, flat_q, cfg,
                                              cfg.rotation_scale, anchor)
-    d_t = norms(flat_p - np.asarray(position)[..., None, :])
-    d_r = quat_angle(flat_q, np.asarray(quat)[..., None, :])
-    v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
-    shape = v.shape[:-1] + (G, K)
-    v, per = v.reshape(shape), per.reshape(per.shape[:-1] + (G, K))
-    v = v - v.min(axis=-1, keepdims=True)
-    log_w = -v - np.log(np.sum(np.exp(-v), axis=-1, keepdims=True))
-    m = log_w - per
-    top = m.max(axis=-1)
-    return -(top + np.log(np.sum(np.exp(m - top[..., None]), axis=-1)))
+    shape = per.shape[:-1] + (G, K)
+    d = (norms(flat_p - np.asarray(position)[..., None, :]).reshape(shape),
+         quat_angle(flat_q, np.asarray(quat)[..., None, :]).reshape(shape))
+    return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg, d), per.reshape(shape))
 
 
 def assistance_twists(

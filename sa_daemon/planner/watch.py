@@ -157,7 +157,7 @@ class WatchSearch:
         s = self.snap
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
                         steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background,
-                        anchor=s.anchor, poses=self.poses if watch_steps else None)
+                        anchor=s.anchor, poses=self.poses)
 
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
