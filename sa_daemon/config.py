@@ -232,6 +232,18 @@ class PlannerConfig(_Section):
         "tracker cannot tell apart are not expected to part (measured in session 30 and left off; "
         "docs/model.md)",
     )
+    watch_evidence: float = Field(
+        1.0, ge=0, le=1,
+        description="watch model: the share of the predicted input's log-likelihood a watched branch's belief "
+        "takes (1 = all of it: a user heading exactly to the goal; less expects the information a noisy user "
+        "gives; measured in session 31, docs/model.md)",
+    )
+    watch_copy_evidence: float = Field(
+        1.0, ge=0, le=1,
+        description="watch model: the share of that evidence that splits copies of one target (resampled grasp "
+        "poses, III-G); each target's mass is updated with all of it. 1 = copies part as the input predicts; "
+        "0 = the watch expects them to keep the plan's split (session 31, docs/model.md)",
+    )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(
         0, ge=0, le=64,

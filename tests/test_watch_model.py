@@ -199,6 +199,19 @@ def _outcomes(cfg, goals, question_target: str, b: np.ndarray) -> list[tuple[np.
     return [(P["yes"], yes_b), (P["no"], no_b), (P["other"], other_b)]
 
 
+def _watched_belief(cfg, target_index, b0, ll) -> np.ndarray:
+    """A watched branch's belief, goal by goal: each target's mass by Bayes on ``watch_evidence`` x the
+    log-likelihood, its copies split by ``watch_copy_evidence`` of that."""
+    lam, kappa = cfg.planner.watch_evidence, cfg.planner.watch_copy_evidence
+    full = b0 * np.exp(lam * (ll - ll.max()))
+    part = b0 * np.exp(kappa * lam * (ll - ll.max()))
+    out = np.zeros_like(b0)
+    for g in range(len(b0)):
+        same = target_index == target_index[g]
+        out[g] = full[same].sum() / full.sum() * part[g] / part[same].sum()
+    return out
+
+
 def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     """Every root action's value by a plain recursion over the tree of ``planner/watch.py``'s module doc:
     one node at a time, no batching, no deduplication, one rollout per start pose."""
@@ -239,9 +252,7 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     for w in s.watched:
         total = 0.0
         for j, g in enumerate(s.branches):
-            log_b = np.log(b0) + R.loglik[0, g, w]
-            bc = np.exp(log_b - log_b.max())
-            bc /= bc.sum()
+            bc = _watched_belief(cfg, snap.goals.target_index, b0, R.loglik[0, g, w])
             kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
             total += p[j] * (R.watch_return[0, g, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[g])
         watched[s.moves[w]] = total
@@ -253,7 +264,8 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
 def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, third):
     rng = np.random.default_rng(seed)
     cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
-               watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2])
+               watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2],
+               watch_evidence=(1.0, 0.5, 0.0)[seed % 3])
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
     asking = cfg.asking.model_copy(update={"third_answer": third})
     cfg = cfg.model_copy(update={"reward": reward, "asking": asking})
