@@ -21,7 +21,9 @@ is not: ``watch`` runs the motion ``w`` for ``n_w`` steps (``planner.watch_s``) 
 ``g``; the arm reaches ``x'_gw`` and the belief becomes ``b'_gw``: the root belief updated with the
 MaxEnt IOC likelihood of the joystick input predicted for that user, against each goal's ``k_c``
 (``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
-``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`). If the
+``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`), taking ``planner.watch_evidence``
+of that evidence and ``planner.watch_copy_evidence`` of it between copies of one target
+(:func:`watched_beliefs`; both 1 by default, Bayes' rule). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), weighted by ``b``
 renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
