@@ -233,10 +233,11 @@ class PlannerConfig(_Section):
         "docs/model.md)",
     )
     watch_evidence: float = Field(
-        1.0, ge=0, le=1,
+        0.5, ge=0, le=1,
         description="watch model: the share of the predicted input's log-likelihood a watched branch's belief "
-        "takes (1 = all of it: a user heading exactly to the goal; less expects the information a noisy user "
-        "gives; measured in session 31, docs/model.md)",
+        "takes. 1 = all of it, a user heading exactly to the goal (until session 31); the population's input "
+        "gives 0.08-1.00 of it (docs/results/evidence.py); 0.5 adopted by session 29's rule on fresh seeds "
+        "(session 31, docs/model.md)",
     )
     watch_copy_evidence: float = Field(
         1.0, ge=0, le=1,

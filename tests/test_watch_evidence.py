@@ -4,7 +4,8 @@
 The watch predicts the input of a user heading exactly to each goal, and updates a branch's belief with
 all of its MaxEnt IOC evidence. ``watch_evidence`` takes a share of that evidence (a noisier user);
 ``watch_copy_evidence`` takes a share of it *between the copies of one target* (resampled grasp poses,
-III-G) while each target's mass is updated with all of it. Both default to 1: the search as it was.
+III-G) while each target's mass is updated with all of it. Until session 31 both were 1; since then the
+watch takes half the evidence (``watch_evidence = 0.5``), split between copies as the rest.
 """
 
 from __future__ import annotations

@@ -14,8 +14,10 @@ the log-odds of the user's true target ``T`` against every other target ``t`` (b
 
 and reports per user the least-squares slope through the origin, ``lambda = sum(realised * predicted) /
 sum(predicted^2)``: 1 means the input tells the targets apart as fast as the watch expects, 0.5 half as
-fast. ``planner.watch_evidence`` is that share in the model (docs/model.md, session 31). A diagnostic,
-not an interface: it reads the search's internals.
+fast. The prediction is the whole evidence (``lambda = 1``) whatever the configuration says:
+``planner.watch_evidence`` is the share the model takes of it (docs/model.md, session 31), and this
+measures what that share should be. The trials run with the configuration given (the policy's choices
+depend on it). A diagnostic, not an interface: it reads the search's internals.
 """
 
 from __future__ import annotations
@@ -67,8 +69,7 @@ def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tu
         a = search.moves.index(result.action)
         R = search._rollouts(snap.pose.position[None], snap.pose.quat_wxyz[None], search.b0[None], search.n, search.n_w)
         w = search.b0[copies] / search.b0[copies].sum()
-        child = watched_beliefs(search.b0, R.loglik[0, copies, a], goals.target_index,
-                                cfg.planner.watch_evidence, cfg.planner.watch_copy_evidence)
+        child = watched_beliefs(search.b0, R.loglik[0, copies, a], goals.target_index)  # all of it: lambda = 1
         predicted = sum(wk * (np.log(P[T] / P) - np.log(P0[T] / P0))
                         for wk, P in zip(w, (_target_masses(goals, c) for c in child)))
         P1 = _target_masses(plans[j][1].goals, plans[j][1].probs)

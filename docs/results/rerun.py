@@ -30,7 +30,7 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 
 BEFORE_THE_KEY = {
-    "planner": {"model": "commit", "ho_belief": "fixed"},
+    "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0},
     "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
@@ -44,7 +44,8 @@ in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s n
 ``intent.rotation_rationality`` (session 14) weighed rotation input with its ``intent.rationality``; one
 without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone; one without
 ``intent.turn_charge`` (session 22) charged a turn nothing; one without ``asking.withdraw_no_s`` (session 28)
-held every "no" final. The ``-turn-charge`` files (session 22) measured
+held every "no" final; one without ``planner.watch_evidence`` (session 31) credited a watch with all
+of the predicted input's evidence. The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 

@@ -23,7 +23,8 @@ MaxEnt IOC likelihood of the joystick input predicted for that user, against eac
 (``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
 ``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`), taking ``planner.watch_evidence``
 of that evidence and ``planner.watch_copy_evidence`` of it between copies of one target
-(:func:`watched_beliefs`; both 1 by default, Bayes' rule). If the
+(:func:`watched_beliefs`; by default half the evidence, and its split between copies as the rest: the
+input people give carries less than a user heading exactly to the goal, session 31). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), weighted by ``b``
 renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
