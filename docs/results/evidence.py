@@ -72,7 +72,8 @@ def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tu
         child = watched_beliefs(search.b0, R.loglik[0, copies, a], goals.target_index)  # all of it: lambda = 1
         predicted = sum(wk * (np.log(P[T] / P) - np.log(P0[T] / P0))
                         for wk, P in zip(w, (_target_masses(goals, c) for c in child)))
-        P1 = _target_masses(plans[j][1].goals, plans[j][1].probs)
+        later = plans[j][1].goals.target_probabilities(plans[j][1].probs)  # by name: resampling may reorder
+        P1 = np.maximum([later.get(t, 0.0) for t in goals.targets], 1e-6)
         realised = np.log(P1[T] / P1) - np.log(P0[T] / P0)
         out.append((float(predicted[others] @ realised[others]), float(predicted[others] @ predicted[others]),
                     result.action.kind.value))
