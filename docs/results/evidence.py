@@ -39,8 +39,11 @@ TASKS = (("scene1", "cup:top"),) + tuple(("study-simple", t) for t in ("bottle:s
 """Table I's task and the simple study's three."""
 
 
-def _target_masses(goals, probs: np.ndarray) -> np.ndarray:
-    return np.maximum(np.bincount(goals.target_index, weights=probs, minlength=len(goals.targets)), 1e-6)
+def _target_masses(goals, probs: np.ndarray, targets: tuple[str, ...]) -> np.ndarray:
+    """Each of ``targets``' probability under ``goals``' belief ``probs`` (by name: resampling may reorder
+    the copies), floored at 1e-6 for the log-odds."""
+    by_name = goals.target_probabilities(probs)
+    return np.maximum([by_name.get(t, 0.0) for t in targets], 1e-6)
 
 
 def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tuple[float, float, str]]:
@@ -58,22 +61,23 @@ def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tu
             continue
         goals = snap.goals
         T = goals.targets.index(task)
-        P0 = _target_masses(goals, snap.probs)
+        P0 = _target_masses(goals, snap.probs, goals.targets)
         others = (P0 > 1e-3) & (np.arange(len(P0)) != T)
         if not (1e-3 < P0[T] < 0.999 and others.any()):
             continue
         search = WatchSearch(model, snap)
+        if not search.watched:
+            raise SystemExit("this configuration watches no motion (planner.watch_levels = 0): nothing to measure")
         copies = [g for g in search.branches if goals.target_index[g] == T]
         if result.action not in search.moves or not copies:
             continue
         a = search.moves.index(result.action)
-        R = search._rollouts(snap.pose.position[None], snap.pose.quat_wxyz[None], search.b0[None], search.n, search.n_w)
+        R = search.root_rollouts()
         w = search.b0[copies] / search.b0[copies].sum()
         child = watched_beliefs(search.b0, R.loglik[0, copies, a], goals.target_index)  # all of it: lambda = 1
         predicted = sum(wk * (np.log(P[T] / P) - np.log(P0[T] / P0))
-                        for wk, P in zip(w, (_target_masses(goals, c) for c in child)))
-        later = plans[j][1].goals.target_probabilities(plans[j][1].probs)  # by name: resampling may reorder
-        P1 = np.maximum([later.get(t, 0.0) for t in goals.targets], 1e-6)
+                        for wk, P in zip(w, (_target_masses(goals, c, goals.targets) for c in child)))
+        P1 = _target_masses(plans[j][1].goals, plans[j][1].probs, goals.targets)
         realised = np.log(P1[T] / P1) - np.log(P0[T] / P0)
         out.append((float(predicted[others] @ realised[others]), float(predicted[others] @ predicted[others]),
                     result.action.kind.value))

@@ -37,8 +37,7 @@ def search_parts(model: SharedAutonomyModel, snap) -> dict:
     ``stay`` (a question's standing still, per branch) and ``complete``. ``plan_watch`` gives an action
     the better of its commit and watch values."""
     ws = WatchSearch(model, snap)
-    pose = snap.pose
-    R = ws._rollouts(pose.position[None], pose.quat_wxyz[None], ws.b0[None], ws.n, ws.n_w if ws.watched else 0)
+    R = ws.root_rollouts()
     g = ws.branches
     commit = {a: (float(ws.b0 @ R.value[0, :, j, ws.n]), R.value[0, g, j, ws.n].copy())
               for j, a in enumerate(ws.moves)}

@@ -194,6 +194,13 @@ class WatchSearch:
                         steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background,
                         anchor=s.anchor, poses=self.poses)
 
+    def root_rollouts(self) -> Rollouts:
+        """The rollouts from the snapshot's pose and belief over the whole horizon, with the watched steps if
+        any motion is watched: the root's commit values, and the predicted input's ``loglik``."""
+        pose = self.snap.pose
+        return self._rollouts(pose.position[None], pose.quat_wxyz[None], self.b0[None], self.n,
+                              self.n_w if self.watched else 0)
+
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
         return time.perf_counter() > self.deadline or (self.node_budget is not None and self.nodes >= self.node_budget)
@@ -354,9 +361,7 @@ class WatchSearch:
     def run(self) -> tuple[dict[Action, float], dict[Action, float], bool]:
         """Values of the root's commits and questions, and of its watched motions, searched before the
         deadline or budget; ``True`` if every watched motion was."""
-        pose = self.snap.pose
-        R = self._rollouts(pose.position[None], pose.quat_wxyz[None], self.b0[None], self.n,
-                           self.n_w if self.watched else 0)
+        R = self.root_rollouts()
         commit = self.b0 @ R.value[0, :, :, self.n]
         values = {a: float(v) for a, v in zip(self.moves, commit, strict=True)}
         self.nodes += 1
