@@ -48,6 +48,56 @@ def test_candidate_goal_ties_broken_by_distance(make_goal, start_pose):
     assert list(model_with(top_goals=10).candidate_goals(goals, probs, start_pose)) == [2, 1, 3, 0]
 
 
+def _split_bowl(make_goal, start_pose) -> tuple[GoalSet, np.ndarray]:
+    """A bowl target resampled into four copies (0.06 each, 0.24 in all) among four one-goal targets."""
+    p = start_pose.position
+    copies = [make_goal("bowl", "top", p + [0.10 * (k + 1), 0.0, 0.0]) for k in range(4)]
+    others = [make_goal(name, "top", p + [0.0, 0.1, 0.0]) for name in ("cup", "plate", "apple", "can")]
+    return GoalSet((*copies, *others)), np.array([0.06, 0.06, 0.06, 0.06, 0.10, 0.09, 0.08, 0.07])
+
+
+def test_candidate_goals_ranked_by_goal_drop_a_split_target(make_goal, start_pose):
+    goals, probs = _split_bowl(make_goal, start_pose)
+    got = model_with(top_goals=3, rank_goals="goal").candidate_goals(goals, probs, start_pose)
+    assert list(got) == [4, 5, 6]  # the likeliest target (0.24) has no move and no question
+
+
+def test_candidate_goals_ranked_by_target_keep_a_split_target(make_goal, start_pose):
+    goals, probs = _split_bowl(make_goal, start_pose)
+    m = model_with(top_goals=3, rank_goals="target")
+    assert list(m.candidate_goals(goals, probs, start_pose)) == [0, 1, 2]  # its copies, nearest first
+    assert list(model_with(top_goals=6, rank_goals="target").candidate_goals(goals, probs, start_pose)) == [
+        0, 1, 2, 3, 4, 5]
+    moves, questions = m.action_set("policy", goals, probs, start_pose, frozenset())
+    assert [a.target for a in questions] == ["bowl:top"]  # one question per target
+    assert [a.goal for a in moves if a.kind is ActionKind.MOVE] == [0, 1, 2]
+
+
+def test_candidate_goals_ranked_by_target_within_it_by_own_probability(make_goal, start_pose):
+    goals, probs = _split_bowl(make_goal, start_pose)
+    probs = probs.copy()
+    probs[:4] = [0.02, 0.03, 0.09, 0.10]  # the copies told apart by input; the far ones likelier
+    got = model_with(top_goals=5, rank_goals="target").candidate_goals(goals, probs, start_pose)
+    assert list(got) == [3, 2, 1, 0, 4]
+
+
+def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pose):
+    rng = np.random.default_rng(3)
+    p = start_pose.position
+    goals = GoalSet(tuple(make_goal(f"obj{k}", "top", p + rng.uniform(-0.3, 0.3, 3)) for k in range(14)))
+    for _ in range(20):
+        probs = rng.dirichlet(np.ones(14))
+        probs[rng.integers(14)] = probs[rng.integers(14)]  # a tie now and then, broken by distance
+        a = model_with(rank_goals="goal").candidate_goals(goals, probs, start_pose)
+        b = model_with(rank_goals="target").candidate_goals(goals, probs, start_pose)
+        assert list(a) == list(b)
+
+
+def test_rank_goals_refused_by_its_key():
+    with pytest.raises(Exception, match="rank_goals"):
+        config_from_dict({"planner": {"rank_goals": "object"}})
+
+
 def test_candidate_tie_distance_includes_rotation(make_goal, start_pose):
     p = start_pose.position
     # same position; the one whose orientation matches the gripper's is closer

@@ -67,13 +67,22 @@ class SharedAutonomyModel:
     def candidate_goals(self, goals: GoalSet, probs: FloatArray, pose: Pose,
                         desired: tuple[FloatArray, FloatArray] | None = None) -> np.ndarray:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
-        ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them."""
+        ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them.
+
+        With ``planner.rank_goals = "target"`` a goal is ranked first by its high-level target's probability
+        (the sum over the target's copies), then by its own, then by distance: resampling's copies share
+        their target's probability, and ranked by their shares alone a likely target split five ways falls
+        behind every unsplit target above a fifth of it."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
+        p = np.asarray(probs, dtype=float)
         dist = np.linalg.norm(kp - pose.position, axis=-1)
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
-        order = np.lexsort((dist, -np.asarray(probs)))
+        keys = [dist, -p]
+        if self.cfg.planner.rank_goals == "target":
+            keys.append(-np.bincount(goals.target_index, weights=p, minlength=len(goals.targets))[goals.target_index])
+        order = np.lexsort(keys)
         return order[: self.cfg.planner.top_goals]
 
     def action_set(
