@@ -197,11 +197,12 @@ class PlannerConfig(_Section):
     """Anytime solver settings."""
 
     top_goals: int = Field(10, ge=1, le=64, description="G_m: goals with move and question actions")
-    rank_goals: Literal["goal", "target"] = Field(
+    rank_goals: Literal["goal", "lead", "target"] = Field(
         "goal",
         description="what ranks the top G_m goals (section III-B, ties by distance to the gripper): goal = each "
-        "goal's own probability; target = its high-level target's, then its own, so a target resampling split "
-        "into copies (section III-G) keeps its place (docs/model.md, The top goals ranked by their target)",
+        "goal's own probability; lead = the same, but a target resampling split into copies (section III-G) "
+        "has its likeliest copy ranked by the whole target's probability; target = every goal by its "
+        "target's probability, then its own (docs/model.md, The top goals of a split target)",
     )
     budget_s: float = Field(0.1, gt=0, le=1.0, description="wall-clock budget of one plan (s)")
     period_s: float = Field(0.1, ge=0.1, le=0.3, description="planning period (s)")

@@ -81,6 +81,15 @@ def test_candidate_goals_ranked_by_target_within_it_by_own_probability(make_goal
     assert list(got) == [3, 2, 1, 0, 4]
 
 
+def test_candidate_goals_ranked_by_lead_keep_one_copy_of_a_split_target(make_goal, start_pose):
+    goals, probs = _split_bowl(make_goal, start_pose)
+    assert list(model_with(top_goals=3, rank_goals="lead").candidate_goals(goals, probs, start_pose)) == [0, 4, 5]
+    probs = probs.copy()
+    probs[:4] = [0.02, 0.03, 0.09, 0.10]  # the lead is the likeliest copy; the others rank by their own
+    got = model_with(top_goals=5, rank_goals="lead").candidate_goals(goals, probs, start_pose)
+    assert list(got) == [3, 4, 5, 2, 6]  # 0.09 each: the plate is nearer than the bowl's third copy
+
+
 def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pose):
     rng = np.random.default_rng(3)
     p = start_pose.position
@@ -89,8 +98,9 @@ def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pos
         probs = rng.dirichlet(np.ones(14))
         probs[rng.integers(14)] = probs[rng.integers(14)]  # a tie now and then, broken by distance
         a = model_with(rank_goals="goal").candidate_goals(goals, probs, start_pose)
-        b = model_with(rank_goals="target").candidate_goals(goals, probs, start_pose)
-        assert list(a) == list(b)
+        for rank in ("lead", "target"):
+            b = model_with(rank_goals=rank).candidate_goals(goals, probs, start_pose)
+            assert list(a) == list(b)
 
 
 def test_rank_goals_refused_by_its_key():

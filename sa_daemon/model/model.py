@@ -69,20 +69,27 @@ class SharedAutonomyModel:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
         ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them.
 
-        With ``planner.rank_goals = "target"`` a goal is ranked first by its high-level target's probability
-        (the sum over the target's copies), then by its own, then by distance: resampling's copies share
-        their target's probability, and ranked by their shares alone a likely target split five ways falls
-        behind every unsplit target above a fifth of it."""
+        Resampling's copies share their target's probability, so ranked by their shares alone a likely target
+        split five ways falls behind every unsplit target above a fifth of it (``planner.rank_goals =
+        "goal"``, the paper's words). ``"lead"`` ranks each target's likeliest copy (the nearest of equals)
+        by the whole target's probability and the other copies by their own; ``"target"`` ranks every goal
+        by its target's probability, then by its own, then by distance."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
         p = np.asarray(probs, dtype=float)
         dist = np.linalg.norm(kp - pose.position, axis=-1)
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
-        keys = [dist, -p]
-        if self.cfg.planner.rank_goals == "target":
-            keys.append(-np.bincount(goals.target_index, weights=p, minlength=len(goals.targets))[goals.target_index])
-        order = np.lexsort(keys)
+        order = np.lexsort((dist, -p))
+        rank = self.cfg.planner.rank_goals
+        if rank != "goal":
+            ti = goals.target_index
+            tp = np.bincount(ti, weights=p, minlength=len(goals.targets))[ti]
+            if rank == "lead":
+                lead = np.zeros(len(p), dtype=bool)
+                lead[order[np.unique(ti[order], return_index=True)[1]]] = True
+                tp = np.where(lead, tp, p)
+            order = np.lexsort((dist, -p, -tp))
         return order[: self.cfg.planner.top_goals]
 
     def action_set(
