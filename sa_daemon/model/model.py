@@ -69,11 +69,11 @@ class SharedAutonomyModel:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
         ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them.
 
-        Resampling's copies share their target's probability, so ranked by their shares alone a likely target
-        split five ways falls behind every unsplit target above a fifth of it (``planner.rank_goals =
-        "goal"``, the paper's words). ``"lead"`` ranks each target's likeliest copy (the nearest of equals)
-        by the whole target's probability and the other copies by their own; ``"target"`` ranks every goal
-        by its target's probability, then by its own, then by distance."""
+        The probability is ``planner.rank_goals``'s: ``"goal"`` (the paper's words, the default) each goal's
+        own, so a likely target that resampling split five ways ranks each copy at a fifth of it, behind
+        every unsplit target above that; ``"lead"`` the same, but each target's likeliest copy (the nearest
+        of equals) by the whole target's; ``"target"`` every goal by its target's, then by its own
+        (screened in session 32 and left off: ``docs/model.md``)."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
