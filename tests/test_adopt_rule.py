@@ -130,3 +130,24 @@ def test_s29_judges_lost_successes_by_a_paired_test_per_task_and_pooled(adopt):
     assert verdict(both3) == ["(b') pooled: successes lost 6, gained 0 (p = 0.016)"]  # each task 0.125
     assert adopt.mcnemar_lost(3, 0) == pytest.approx(0.125) and adopt.mcnemar_lost(0, 0) == 1.0
     assert adopt.mcnemar_lost(3, 3) == pytest.approx(42 / 64)
+
+
+def test_s32_counts_cells_on_the_seeds_both_succeed(adopt):
+    """Session 32's form: (c'') compares a cell's mean time over the seeds both configurations succeed on,
+    so a mended time-out (a new success, slower than the rest) is not a slower cell, while a cell slower on
+    the shared successes still is; (c) counts the mended cell as slower."""
+    n = 10
+    old = {("scene1", "cup", "policy", "u1"): (n - 1, 10.0, 1.0), ("scene1", "cup", "ho", "u1"): (n, 10.0, 1.0)}
+    a, b = _suite(old, n), _suite(old, n)
+    mended = next(t for t in a["trials"] if t["method"] == "policy" and not t["success"])
+    mended.update(success=True, completion_time_s=28.0)  # the time-out now ends, slowly
+    a["summary"][0]["completion_time_s"] = (10.0 * (n - 1) + 28.0) / n
+    assert adopt.cell_changes(a, b) == {"policy": [0, 1], "ho": [0, 0]}
+    assert adopt.paired_cell_changes(a, b) == {"policy": [0, 0], "ho": [0, 0]}
+    for t in a["trials"]:
+        if t["method"] == "ho":
+            t["completion_time_s"] = 10.6  # 6 % slower on every shared success
+    assert adopt.paired_cell_changes(a, b) == {"policy": [0, 0], "ho": [0, 1]}
+    lost = next(t for t in a["trials"] if t["method"] == "policy" and t["success"] and t is not mended)
+    lost.update(success=False, completion_time_s=100.0)  # a new failure drops out of the pairs
+    assert adopt.paired_cell_changes(a, b)["policy"] == [0, 0]

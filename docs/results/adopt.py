@@ -1,6 +1,6 @@
 """Session 19's rule for adopting a model or tracker option as the default, checked on suite files.
 
-    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28|s28b|s29]
+    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28|s28b|s29|s32]
 
 reads ``DIR/suite-{table1,study-simple,fig7}-TAG.json`` (the option's runs, ``DIR`` defaults to this folder)
 and ``DEFAULT_DIR/suite-{...}-marginal.json`` (the default's, this folder unless told), paired by (scene,
@@ -30,6 +30,15 @@ confirmatory run on fresh seeds"): (b) and (c) as above, and in place of (a)
 
 (b') no (task, method) has fewer successes than the default by an exact one-sided McNemar test at p < 0.05
      (pairs: same user and seed), and neither have all the (task, method) pairs of the three suites pooled.
+
+``--rule s32`` is s29 with (c) replaced, written in session 32 before any run of the candidate it is for
+(``asking.withdraw_yes_s``, whose gain is trials that no longer time out; ``docs/results.md``, "Session 32:
+the default on fresh seeds"): (c) compared a cell's mean time over its successful trials, so a mended
+time-out (a new, slow success) counted as slower and a new failure could count as faster:
+
+(c'') for each method, the (task, user) cells whose mean completion time over the seeds both
+      configurations succeed on (same user and seed) rises by more than 5 % are no more than those whose
+      paired mean time falls by more than 5 %.
 
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
@@ -98,6 +107,27 @@ def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
             continue
         counts[0] += n < (1 - CELL_CHANGE) * o
         counts[1] += n > (1 + CELL_CHANGE) * o
+    return out
+
+
+def paired_cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
+    """Rule s32's (c''): per method, ``[faster, slower]``: the (task, user) cells whose mean time over the
+    seeds both succeed on moved by more than ``CELL_CHANGE`` of the default's (cells with no such seed are
+    not counted)."""
+    before = {trial_key(t): t for t in old["trials"]}
+    times: dict[tuple, list[tuple[float, float]]] = {}
+    for t in new["trials"]:
+        o = before.get(trial_key(t))
+        cell = times.setdefault((t["scene"], t["task"], t["method"], t["user"]), [])
+        if o is not None and t["success"] and o["success"]:
+            cell.append((t["completion_time_s"], o["completion_time_s"]))
+    out: dict[str, list[int]] = {}
+    for (_, _, method, _), pairs in times.items():
+        counts = out.setdefault(method, [0, 0])
+        if pairs:
+            n, o = (sum(p[i] for p in pairs) / len(pairs) for i in (0, 1))
+            counts[0] += n < (1 - CELL_CHANGE) * o
+            counts[1] += n > (1 + CELL_CHANGE) * o
     return out
 
 
@@ -215,8 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
     ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
-    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29"), default="s19",
-                    help="s19: session 19's rule; s28, s28b, s29: for options that leave the tracker")
+    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29", "s32"), default="s19",
+                    help="s19: session 19's rule; s28, s28b, s29, s32: for options that leave the tracker")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
     judged_logp: dict[tuple[str, str], tuple[float, float, float]] = {}
@@ -234,7 +264,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{suite}: no {old_path.name} to compare with; skipped", file=sys.stderr)
             continue
         old = json.loads(old_path.read_text())
-        rows, cells, logp = task_rows(new, old), cell_changes(new, old), logp_changes(new, old)
+        cells = paired_cell_changes(new, old) if args.rule == "s32" else cell_changes(new, old)
+        rows, logp = task_rows(new, old), logp_changes(new, old)
         flips, successes = prediction_flips(new, old), success_flips(new, old)
         for (scene, task, method), (lost, gained, p) in successes.items():
             if lost or gained:
@@ -266,8 +297,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print("\n" + "\n".join(lines) + "\n")
     fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None,
-                  judged_flips if args.rule in ("s28b", "s29") else None,
-                  judged_successes if args.rule == "s29" else None)
+                  judged_flips if args.rule in ("s28b", "s29", "s32") else None,
+                  judged_successes if args.rule in ("s29", "s32") else None)
     print(f"Rule {args.rule}: " + ("adopt" if not fails else "off"))
     for f in fails:
         print("  " + f)
