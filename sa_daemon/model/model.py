@@ -84,7 +84,7 @@ class SharedAutonomyModel:
         rank = self.cfg.planner.rank_goals
         if rank != "goal":
             ti = goals.target_index
-            tp = np.bincount(ti, weights=p, minlength=len(goals.targets))[ti]
+            tp = goals.target_sums(p)[ti]
             if rank == "lead":
                 lead = np.zeros(len(p), dtype=bool)
                 lead[order[np.unique(ti[order], return_index=True)[1]]] = True

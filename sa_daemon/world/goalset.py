@@ -106,7 +106,11 @@ class GoalSet:
         """``(G,)``: ``d_trans + w d_rot`` (m) from ``pose`` to each goal's ``k_c``."""
         return np.min(self._pose_distances(pose, rotation_weight_m_per_rad), axis=-1)
 
+    def target_sums(self, probs: FloatArray) -> FloatArray:
+        """``(len(targets),)``: each high-level target's probability (summed over its copies), in
+        :attr:`targets` order."""
+        return np.bincount(self.target_index, weights=probs, minlength=len(self.targets))
+
     def target_probabilities(self, probs: FloatArray) -> dict[str, float]:
-        """Probability of each high-level target (summed over its copies)."""
-        sums = np.bincount(self.target_index, weights=probs, minlength=len(self.targets))
-        return {t: float(p) for t, p in zip(self.targets, sums)}
+        """Probability of each high-level target (summed over its copies), by name."""
+        return {t: float(p) for t, p in zip(self.targets, self.target_sums(probs))}
