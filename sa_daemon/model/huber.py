@@ -253,7 +253,8 @@ def marginal_nll_driven(
     per = cfg.rationality * q_minus_v_driven(position, quat, user_linear, user_angular, flat_p, flat_q, cfg,
                                              cfg.rotation_scale, anchor)
     shape = per.shape[:-1] + (G, K)
-    # distances against the flat (G K) set, reshaped: quat_angle takes its one-matrix-product path so
+    # distances against the flat (G K) set, reshaped: quat_angle then takes its one-matrix-product path, as
+    # the recorded files were made (the broadcast (..., G, K) form differs in the last bit)
     d = (norms(flat_p - np.asarray(position)[..., None, :]).reshape(shape),
          quat_angle(flat_q, np.asarray(quat)[..., None, :]).reshape(shape))
     return mixture_nll(pose_log_weights(position, quat, goal_positions, goal_quats, cfg, d), per.reshape(shape))
