@@ -8,10 +8,12 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from sa_daemon.config import Config
-from sa_daemon.sim.episode import run_trial
+from sa_daemon.planner.snapshot import Snapshot
+from sa_daemon.sim.episode import question_record, run_trial
 from sa_daemon.sim.evaluate import (
     TrialSpec,
     compare,
@@ -21,6 +23,7 @@ from sa_daemon.sim.evaluate import (
     summarise,
 )
 from sa_daemon.sim.suites import SUITES, suite
+from sa_daemon.world.goalset import GoalSet
 from sa_daemon.world.holding import OUTSIDE
 from sa_daemon.world.scene import load_scene
 
@@ -181,9 +184,9 @@ def test_eval_needs_a_scene_or_a_suite():
 # -- when and what policy asks (issue 16's measures) ---------------------------------------------------
 
 
-def _asked(t: float, over_uniform: float, rank: int) -> dict:
-    return {"t": t, "target": "cup:top", "p_max": over_uniform / 4, "over_uniform": over_uniform,
-            "object_rank": rank}
+def _asked(t: float, over_uniform: float, rank: int, target_rank: int | None = None) -> dict:
+    q = {"t": t, "target": "cup:top", "p_max": over_uniform / 4, "over_uniform": over_uniform, "object_rank": rank}
+    return q if target_rank is None else {**q, "target_rank": target_rank}
 
 
 def test_question_measures_count_near_uniform_questions_object_ranks_first_times_and_early_choices():
@@ -194,9 +197,24 @@ def test_question_measures_count_near_uniform_questions_object_ranks_first_times
     m = question_measures([a, b, c])
     assert m["questions_near_uniform"] == pytest.approx(1 / 3)  # one, in the first trial
     assert m["questions_top2"] == pytest.approx(2 / 3)  # ranks 3, 1, 2
+    assert m["questions_top_target"] is None  # records from before session 33 lack the target's rank
     assert m["first_question_s"] == pytest.approx((0.8 + 2.0) / 2)  # over the trials that asked
     assert m["early_passive"] == pytest.approx((1 + 9 + 10) / 29)
     assert question_measures([_trial("policy", 0, 10.0)]) == dict.fromkeys(m)  # old records: nothing
+    d = {**_trial("policy", 3, 9.0), "asked": [_asked(1.0, 2.0, 3, 1), _asked(2.0, 2.0, 1, 2)]}
+    assert question_measures([d])["questions_top_target"] == pytest.approx(1 / 2)
+
+
+def test_a_question_record_ranks_the_target_apart_from_its_object():
+    # Scene 1's targets: cup:top, cup:side, chips can:side, bowl:top. The bowl is the likeliest target,
+    # but the cup's two grasps together make the cup the likeliest object
+    scene = load_scene("scene1")
+    snap = Snapshot(GoalSet(scene.goals), np.array([0.25, 0.25, 0.2, 0.3]), scene.start, np.zeros(6))
+    bowl, cup_side, chips = (question_record(snap, t, 1.0) for t in ("bowl:top", "cup:side", "chips can:side"))
+    assert (bowl["target_rank"], bowl["object_rank"]) == (1, 2)
+    assert (cup_side["target_rank"], cup_side["object_rank"]) == (2, 1)  # tied with cup:top: the better rank
+    assert (chips["target_rank"], chips["object_rank"]) == (4, 3)
+    assert bowl["p_max"] == pytest.approx(0.3) and bowl["over_uniform"] == pytest.approx(1.2)
 
 
 def test_a_trial_records_each_question_with_the_belief_it_was_asked_on():
@@ -209,6 +227,6 @@ def test_a_trial_records_each_question_with_the_belief_it_was_asked_on():
     assert [q["t"] for q in r.asked] == sorted(q["t"] for q in r.asked)
     for q in r.asked:
         assert 1.0 <= q["over_uniform"] <= 4.0 and q["p_max"] == pytest.approx(q["over_uniform"] / 4, abs=1e-5)
-        assert q["object_rank"] >= 1
+        assert q["object_rank"] >= 1 and q["target_rank"] >= 1
     assert 0 < sum(r.early_plans.values()) <= 20  # plans every 0.1 s, none while a question waits
     assert ("question" in r.early_plans) == (r.asked[0]["t"] < 2.0)

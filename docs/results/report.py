@@ -122,8 +122,8 @@ def asking(trials: list[dict]) -> list[str]:
 
 def _asking_table(pol: list[dict], by: str) -> list[str]:
     head = (f"| {by} | trials | questions a task | most in a trial | near uniform | about a top-2 object | "
-            "first question (s) | early plans HO or none |")
-    lines = [head, "|" + "---|" * 8]
+            "about the likeliest target | first question (s) | early plans HO or none |")
+    lines = [head, "|" + "---|" * 9]
     for key in dict.fromkeys(t[by] for t in pol):
         mine = [t for t in pol if t[by] == key]
         asked = [q for t in mine for q in t["asked"]]
@@ -132,6 +132,7 @@ def _asking_table(pol: list[dict], by: str) -> list[str]:
         lines.append("| " + " | ".join([
             f"`{key}`" if by == "task" else key, str(len(mine)), _mean_ci([len(t["asked"]) for t in mine]), str(max(len(t["asked"]) for t in mine)),
             _mean([q["over_uniform"] < 1.1 for q in asked]), _mean([q["object_rank"] <= 2 for q in asked]),
+            _mean([q["target_rank"] == 1 if "target_rank" in q else None for q in asked]),
             _mean([t["asked"][0]["t"] if t["asked"] else None for t in mine]), _mean(passive)]) + " |")
     return lines
 

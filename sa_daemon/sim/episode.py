@@ -109,8 +109,11 @@ EARLY_S = 2.0
 
 def question_record(snap: Snapshot, target: str, t: float) -> dict:
     """A question as the trial records it: when (s), about which target, the largest target probability
-    then and that over uniform (``1.0``: a uniform belief; issue 16 asks for none below 1.1), and the rank
-    of the target's object among the objects by probability (1 = the most likely)."""
+    then and that over uniform (``1.0``: a uniform belief; issue 16 asks for none below 1.1), the rank
+    of the target's object among the objects by probability (1 = the most likely; an object's probability
+    is the sum over its grasp types), and the rank of the target itself among the targets (1 = the most
+    likely target; ties share the better rank). The two ranks differ where the likeliest target belongs to
+    an object whose probability is spread over fewer grasp types than another's."""
     tp = snap.goals.target_probabilities(snap.probs)
     objects: dict[str, float] = {}
     for k, v in tp.items():
@@ -119,7 +122,8 @@ def question_record(snap: Snapshot, target: str, t: float) -> dict:
     ranked = sorted(objects, key=lambda o: -objects[o])
     p_max = max(tp.values())
     return {"t": round(t, 6), "target": target, "p_max": round(p_max, 6),
-            "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(parse_target(target)[0]) + 1}
+            "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(parse_target(target)[0]) + 1,
+            "target_rank": 1 + sum(v > tp[target] for v in tp.values())}
 
 
 def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str | None = None,

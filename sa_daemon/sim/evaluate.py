@@ -191,13 +191,15 @@ def question_measures(ts: list[dict]) -> dict:
     * ``questions_near_uniform``: questions a trial asked while the largest target probability was below
       1.1 / number of targets, mean over trials;
     * ``questions_top2``: the share of questions whose target's object was one of the two most likely;
+    * ``questions_top_target``: the share of questions about the likeliest target itself (records since
+      session 33; ``None`` before);
     * ``first_question_s``: when the first question came, mean over the trials that asked;
     * ``early_passive``: the share of the plans of the first ``EARLY_S`` that chose HO or no-assist.
     """
     recs = [t for t in ts if "asked" in t]
     if not recs:
-        return {"questions_near_uniform": None, "questions_top2": None, "first_question_s": None,
-                "early_passive": None}
+        return {"questions_near_uniform": None, "questions_top2": None, "questions_top_target": None,
+                "first_question_s": None, "early_passive": None}
     qs = [q for t in recs for q in t["asked"]]
     firsts = [t["asked"][0]["t"] for t in recs if t["asked"]]
     early = [t.get("early_plans", {}) for t in recs]
@@ -205,6 +207,8 @@ def question_measures(ts: list[dict]) -> dict:
     return {
         "questions_near_uniform": float(np.mean([sum(q["over_uniform"] < 1.1 for q in t["asked"]) for t in recs])),
         "questions_top2": float(np.mean([q["object_rank"] <= 2 for q in qs])) if qs else None,
+        "questions_top_target": (float(np.mean([q["target_rank"] == 1 for q in qs]))
+                                 if qs and all("target_rank" in q for q in qs) else None),
         "first_question_s": float(np.mean(firsts)) if firsts else None,
         "early_passive": (sum(e.get("ho", 0) + e.get("none", 0) for e in early) / n_early) if n_early else None,
     }
