@@ -197,12 +197,17 @@ class PlannerConfig(_Section):
     """Anytime solver settings."""
 
     top_goals: int = Field(10, ge=1, le=64, description="G_m: goals with move and question actions")
-    rank_goals: Literal["goal", "lead", "target"] = Field(
+    rank_goals: Literal["goal", "lead", "target", "cover"] = Field(
         "goal",
         description="what ranks the top G_m goals (section III-B, ties by distance to the gripper): goal = each "
         "goal's own probability; lead = the same, but a target resampling split into copies (section III-G) "
         "has its likeliest copy ranked by the whole target's probability; target = every goal by its "
-        "target's probability, then its own (docs/model.md, The top goals of a split target)",
+        "target's probability, then its own; cover = goal's, but the likeliest copy of each of the "
+        "cover_targets likeliest targets always among them (docs/model.md, The top goals of a split target)",
+    )
+    cover_targets: int = Field(
+        2, ge=1, le=64, description='with rank_goals = "cover": how many of the likeliest targets keep their '
+        "likeliest copy among the top G_m goals (2, chosen before any run: the issue's two likeliest)",
     )
     budget_s: float = Field(0.1, gt=0, le=1.0, description="wall-clock budget of one plan (s)")
     period_s: float = Field(0.1, ge=0.1, le=0.3, description="planning period (s)")

@@ -90,6 +90,25 @@ def test_candidate_goals_ranked_by_lead_keep_one_copy_of_a_split_target(make_goa
     assert list(got) == [3, 4, 5, 2, 6]  # 0.09 each: the plate is nearer than the bowl's third copy
 
 
+def test_candidate_goals_covered_keep_the_likeliest_targets_in_goal_order(make_goal, start_pose):
+    goals, probs = _split_bowl(make_goal, start_pose)
+    # the bowl (0.24) is the likeliest target: its nearest copy replaces the last of "goal"'s three
+    assert list(model_with(top_goals=3, rank_goals="cover").candidate_goals(goals, probs, start_pose)) == [4, 5, 0]
+    # the cup (0.10) is the second: already in, so one copy of the bowl is all that changes
+    assert list(model_with(top_goals=3, rank_goals="cover", cover_targets=1).candidate_goals(
+        goals, probs, start_pose)) == [4, 5, 0]
+    assert list(model_with(top_goals=5, rank_goals="cover").candidate_goals(goals, probs, start_pose)) == [
+        4, 5, 6, 7, 0]
+    probs = probs.copy()
+    probs[:4] = [0.02, 0.03, 0.09, 0.10]  # the bowl's likeliest copy is its farthest
+    got = model_with(top_goals=2, rank_goals="cover").candidate_goals(goals, probs, start_pose)
+    assert list(got) == [4, 3]  # already "goal"'s top two (0.10 each, the cup nearer): nothing changes
+    probs[:4] = [0.06, 0.06, 0.06, 0.06]
+    probs[4:] = [0.07, 0.07, 0.07, 0.05]  # three-way tie for second: the first target (the cup) is covered
+    got = model_with(top_goals=2, rank_goals="cover", cover_targets=2).candidate_goals(goals, probs, start_pose)
+    assert sorted(got) == [0, 4]
+
+
 def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pose):
     rng = np.random.default_rng(3)
     p = start_pose.position
@@ -98,7 +117,7 @@ def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pos
         probs = rng.dirichlet(np.ones(14))
         probs[rng.integers(14)] = probs[rng.integers(14)]  # a tie now and then, broken by distance
         a = model_with(rank_goals="goal").candidate_goals(goals, probs, start_pose)
-        for rank in ("lead", "target"):
+        for rank in ("lead", "target", "cover"):
             b = model_with(rank_goals=rank).candidate_goals(goals, probs, start_pose)
             assert list(a) == list(b)
 
@@ -106,6 +125,8 @@ def test_candidate_goals_rank_alike_when_no_target_is_split(make_goal, start_pos
 def test_rank_goals_refused_by_its_key():
     with pytest.raises(Exception, match="rank_goals"):
         config_from_dict({"planner": {"rank_goals": "object"}})
+    with pytest.raises(Exception, match="cover_targets"):
+        config_from_dict({"planner": {"rank_goals": "cover", "cover_targets": 0}})
 
 
 def test_candidate_tie_distance_includes_rotation(make_goal, start_pose):

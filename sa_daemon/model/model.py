@@ -73,7 +73,11 @@ class SharedAutonomyModel:
         own, so a likely target that resampling split five ways ranks each copy at a fifth of it, behind
         every unsplit target above that; ``"lead"`` the same, but each target's likeliest copy (the nearest
         of equals) by the whole target's; ``"target"`` every goal by its target's, then by its own
-        (screened in session 32 and left off: ``docs/model.md``)."""
+        (screened in session 32 and left off: ``docs/model.md``); ``"cover"`` the goals ``"goal"`` ranks,
+        but the likeliest copy of each of the ``planner.cover_targets`` likeliest targets always among
+        them, in place of the last of the others (session 33: the fewest changes that keep a likely split
+        target in the plan). The result keeps ``"goal"``'s order, so ``"cover"`` equals ``"goal"`` whenever
+        those copies already rank among the top ``G_m``."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
@@ -82,6 +86,9 @@ class SharedAutonomyModel:
         dist = dist + self.cfg.intent.rotation_weight_m_per_rad * quat_angle(kq, pose.quat_wxyz)
         order = np.lexsort((dist, -p))
         rank = self.cfg.planner.rank_goals
+        g_m = self.cfg.planner.top_goals
+        if rank == "cover":
+            return self._covered(goals, p, order, g_m)
         if rank != "goal":
             ti = goals.target_index
             tp = goals.target_sums(p)[ti]
@@ -90,7 +97,20 @@ class SharedAutonomyModel:
                 lead[order[np.unique(ti[order], return_index=True)[1]]] = True
                 tp = np.where(lead, tp, p)
             order = np.lexsort((dist, -p, -tp))
-        return order[: self.cfg.planner.top_goals]
+        return order[:g_m]
+
+    def _covered(self, goals: GoalSet, p: FloatArray, order: np.ndarray, g_m: int) -> np.ndarray:
+        """``"cover"``'s top ``G_m`` goals from ``"goal"``'s ``order``: the likeliest copy (first in
+        ``order``) of each of the ``planner.cover_targets`` likeliest targets (ties: the first target), then
+        the rest of ``order`` to ``G_m`` goals, returned in ``order``'s order."""
+        sums = goals.target_sums(p)
+        top = np.lexsort((np.arange(len(sums)), -sums))[: min(self.cfg.planner.cover_targets, g_m)]
+        ti = goals.target_index[order]
+        chosen = np.zeros(len(order), dtype=bool)  # over positions in ``order``
+        chosen[[int(np.argmax(ti == t)) for t in top]] = True
+        for pos in np.flatnonzero(~chosen)[: g_m - int(chosen.sum())]:
+            chosen[pos] = True
+        return order[chosen]
 
     def action_set(
         self, method: str | MethodSpec, goals: GoalSet, probs: FloatArray, pose: Pose, asked: frozenset[str]
