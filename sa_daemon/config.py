@@ -646,10 +646,11 @@ class AskingConfig(_Section):
         False, description='a third answer, "yes, that object, but another grasp" (the paper: yes or no only)'
     )
     withdraw_yes_s: float = Field(
-        0.0, ge=0, le=30,
+        2.0, ge=0, le=30,
         description='a "yes" stops being final once the user has opposed the assistance in blend.opposition_share '
         "of the control periods with input over this window (s): a misheard or mistaken yes no longer holds the "
-        "arm on the wrong target; 0 = a yes is final (our reading of section III-B; docs/model.md)",
+        "arm on the wrong target; 2 s by default since session 33 (chosen by rule s32, written before its run; "
+        "docs/model.md), 0 = a yes is final (our reading of section III-B)",
     )
     withdraw_no_s: float = Field(
         2.0, ge=0, le=30,

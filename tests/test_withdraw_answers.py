@@ -1,4 +1,4 @@
-"""Answers that stop being final (``asking.withdraw_yes_s``, off by default; ``asking.withdraw_no_s``, 2 s by default).
+"""Answers that stop being final (``asking.withdraw_yes_s`` and ``asking.withdraw_no_s``, 2 s by default).
 
 A yes is final in the paper's reading (docs/model.md, "A yes is final"), and so is a no (ours); a
 misheard or mistaken yes then holds the arm on the wrong object, a mistaken no about the person's goal

@@ -35,7 +35,7 @@ BEFORE_THE_KEY = {
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
-    "asking": {"withdraw_no_s": 0.0},
+    "asking": {"withdraw_no_s": 0.0, "withdraw_yes_s": 0.0},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
@@ -45,7 +45,8 @@ in the rollouts, and a TCP speed limit of 0.25 m/s where there was none: 1 m/s n
 without ``intent.poses`` (session 18) read a goal's input against its lowest-value pose alone; one without
 ``intent.turn_charge`` (session 22) charged a turn nothing; one without ``asking.withdraw_no_s`` (session 28)
 held every "no" final; one without ``planner.watch_evidence`` (session 31) credited a watch with all
-of the predicted input's evidence. The ``-turn-charge`` files (session 22) measured
+of the predicted input's evidence; one without ``asking.withdraw_yes_s`` held every "yes" final (the key
+existed since session 27, off; files recorded before it lack it, and it became 2 s in session 33). The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 
