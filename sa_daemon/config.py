@@ -198,12 +198,13 @@ class PlannerConfig(_Section):
 
     top_goals: int = Field(10, ge=1, le=64, description="G_m: goals with move and question actions")
     rank_goals: Literal["goal", "lead", "target", "cover"] = Field(
-        "goal",
+        "cover",
         description="what ranks the top G_m goals (section III-B, ties by distance to the gripper): goal = each "
         "goal's own probability; lead = the same, but a target resampling split into copies (section III-G) "
         "has its likeliest copy ranked by the whole target's probability; target = every goal by its "
         "target's probability, then its own; cover = goal's, but the likeliest copy of each of the "
-        "cover_targets likeliest targets always among them (docs/model.md, The top goals of a split target)",
+        "cover_targets likeliest targets always among them, the default since session 33 (chosen by rule s32, "
+        "written before its run; docs/model.md, The top goals of a split target)",
     )
     cover_targets: int = Field(
         2, ge=1, le=64, description='with rank_goals = "cover": how many of the likeliest targets keep their '

@@ -104,7 +104,7 @@ def test_candidate_goals_covered_keep_the_likeliest_targets_in_goal_order(make_g
     got = model_with(top_goals=2, rank_goals="cover").candidate_goals(goals, probs, start_pose)
     assert list(got) == [4, 3]  # already "goal"'s top two (0.10 each, the cup nearer): nothing changes
     probs[:4] = [0.06, 0.06, 0.06, 0.06]
-    probs[4:] = [0.07, 0.07, 0.07, 0.05]  # three-way tie for second: the first target (the cup) is covered
+    probs[4:] = [0.07, 0.07, 0.07, 0.05]  # three-way tie for second: the one "goal" puts first (the cup)
     got = model_with(top_goals=2, rank_goals="cover", cover_targets=2).candidate_goals(goals, probs, start_pose)
     assert sorted(got) == [0, 4]
 

@@ -69,14 +69,14 @@ class SharedAutonomyModel:
         """Indices of the top ``G_m`` goals by probability, ties broken by distance to the gripper.
         ``desired``: the goals' ``k_c`` at ``pose`` (``GoalSet.desired_poses``) if the caller has them.
 
-        The probability is ``planner.rank_goals``'s: ``"goal"`` (the paper's words, the default) each goal's
+        The probability is ``planner.rank_goals``'s: ``"goal"`` (the paper's words) each goal's
         own, so a likely target that resampling split five ways ranks each copy at a fifth of it, behind
         every unsplit target above that; ``"lead"`` the same, but each target's likeliest copy (the nearest
         of equals) by the whole target's; ``"target"`` every goal by its target's, then by its own
         (screened in session 32 and left off: ``docs/model.md``); ``"cover"`` the goals ``"goal"`` ranks,
         but the likeliest copy of each of the ``planner.cover_targets`` likeliest targets always among
-        them, in place of the last of the others (session 33: the fewest changes that keep a likely split
-        target in the plan). The result keeps ``"goal"``'s order, so ``"cover"`` equals ``"goal"`` whenever
+        them, in place of the last of the others (session 33, the default since: the fewest changes that
+        keep a likely split target in the plan). The result keeps ``"goal"``'s order, so ``"cover"`` equals ``"goal"`` whenever
         those copies already rank among the top ``G_m``."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
@@ -101,13 +101,17 @@ class SharedAutonomyModel:
 
     def _covered(self, goals: GoalSet, p: FloatArray, order: np.ndarray, g_m: int) -> np.ndarray:
         """``"cover"``'s top ``G_m`` goals from ``"goal"``'s ``order``: the likeliest copy (first in
-        ``order``) of each of the ``planner.cover_targets`` likeliest targets (ties: the first target), then
-        the rest of ``order`` to ``G_m`` goals, returned in ``order``'s order."""
+        ``order``) of each of the ``planner.cover_targets`` likeliest targets (ties: the target whose
+        likeliest copy comes first in ``order``, so that unsplit targets rank as ``"goal"`` ranks them),
+        then the rest of ``order`` to ``G_m`` goals, returned in ``order``'s order."""
         sums = goals.target_sums(p)
-        top = np.lexsort((np.arange(len(sums)), -sums))[: min(self.cfg.planner.cover_targets, g_m)]
         ti = goals.target_index[order]
+        lead = np.full(len(sums), len(order))  # each target's likeliest copy, as a position in ``order``
+        for pos in range(len(order) - 1, -1, -1):
+            lead[ti[pos]] = pos
+        top = np.lexsort((lead, -sums))[: min(self.cfg.planner.cover_targets, g_m)]
         chosen = np.zeros(len(order), dtype=bool)  # over positions in ``order``
-        chosen[[int(np.argmax(ti == t)) for t in top]] = True
+        chosen[lead[top]] = True
         for pos in np.flatnonzero(~chosen)[: g_m - int(chosen.sum())]:
             chosen[pos] = True
         return order[chosen]
