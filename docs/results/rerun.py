@@ -30,7 +30,7 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 
 BEFORE_THE_KEY = {
-    "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0},
+    "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0, "rank_goals": "goal"},
     "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
@@ -46,7 +46,9 @@ without ``intent.poses`` (session 18) read a goal's input against its lowest-val
 ``intent.turn_charge`` (session 22) charged a turn nothing; one without ``asking.withdraw_no_s`` (session 28)
 held every "no" final; one without ``planner.watch_evidence`` (session 31) credited a watch with all
 of the predicted input's evidence; one without ``asking.withdraw_yes_s`` held every "yes" final (the key
-existed since session 27, off; files recorded before it lack it, and it became 2 s in session 33). The ``-turn-charge`` files (session 22) measured
+existed since session 27, off; files recorded before it lack it, and it became 2 s in session 33); one
+without ``planner.rank_goals`` (session 32) ranked the top goals by their own probability (``"goal"``;
+``"cover"`` since session 33). The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 
