@@ -28,6 +28,16 @@ from .twists import blend, ho_robot_twist, move_twist
 ZERO_TWIST = np.zeros(6)
 
 
+def _first_positions(targets_in_order: np.ndarray, n_targets: int) -> np.ndarray:
+    """``(n_targets,)``: where each target first appears in ``targets_in_order`` (the target index of
+    each goal, in a ranking's order), i.e. the position of its highest-ranked copy; ``len`` for a target
+    with no goal."""
+    first = np.full(n_targets, len(targets_in_order))
+    present, at = np.unique(targets_in_order, return_index=True)
+    first[present] = at
+    return first
+
+
 @dataclass(frozen=True)
 class Command:
     """What one control tick sends: the action actually applied (``ho+noassist`` may turn HO into
@@ -76,8 +86,8 @@ class SharedAutonomyModel:
         (screened in session 32 and left off: ``docs/model.md``); ``"cover"`` the goals ``"goal"`` ranks,
         but the likeliest copy of each of the ``planner.cover_targets`` likeliest targets always among
         them, in place of the last of the others (session 33, the default since: the fewest changes that
-        keep a likely split target in the plan). The result keeps ``"goal"``'s order, so ``"cover"`` equals ``"goal"`` whenever
-        those copies already rank among the top ``G_m``."""
+        keep a likely split target in the plan). The result keeps ``"goal"``'s order, so ``"cover"``
+        equals ``"goal"`` whenever those copies already rank among the top ``G_m``."""
         if desired is None:
             desired = self.desired_poses(goals, pose, probs)
         kp, kq = desired
@@ -94,7 +104,7 @@ class SharedAutonomyModel:
             tp = goals.target_sums(p)[ti]
             if rank == "lead":
                 lead = np.zeros(len(p), dtype=bool)
-                lead[order[np.unique(ti[order], return_index=True)[1]]] = True
+                lead[order[_first_positions(ti[order], len(goals.targets))]] = True
                 tp = np.where(lead, tp, p)
             order = np.lexsort((dist, -p, -tp))
         return order[:g_m]
@@ -105,15 +115,11 @@ class SharedAutonomyModel:
         likeliest copy comes first in ``order``, so that unsplit targets rank as ``"goal"`` ranks them),
         then the rest of ``order`` to ``G_m`` goals, returned in ``order``'s order."""
         sums = goals.target_sums(p)
-        ti = goals.target_index[order]
-        lead = np.full(len(sums), len(order))  # each target's likeliest copy, as a position in ``order``
-        for pos in range(len(order) - 1, -1, -1):
-            lead[ti[pos]] = pos
+        lead = _first_positions(goals.target_index[order], len(sums))
         top = np.lexsort((lead, -sums))[: min(self.cfg.planner.cover_targets, g_m)]
         chosen = np.zeros(len(order), dtype=bool)  # over positions in ``order``
         chosen[lead[top]] = True
-        for pos in np.flatnonzero(~chosen)[: g_m - int(chosen.sum())]:
-            chosen[pos] = True
+        chosen[np.flatnonzero(~chosen)[: g_m - int(chosen.sum())]] = True
         return order[chosen]
 
     def action_set(
