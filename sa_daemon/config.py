@@ -258,6 +258,14 @@ class PlannerConfig(_Section):
         "poses, III-G); each target's mass is updated with all of it. 1 = copies part as the input predicts; "
         "0 = the watch expects them to keep the plan's split (session 31, docs/model.md)",
     )
+    watch_branches: Literal["top", "mapped", "all"] = Field(
+        "top",
+        description="watch model: the goals a watched motion's value is averaged over. top: the top G_m goals "
+        "(one child each), the belief renormalised over them, where commits and questions average over every "
+        "goal; mapped: every goal the belief holds, each outside the top G_m read through the child of the "
+        "top goal its predicted input is likeliest for (no more children); all: every goal its own child "
+        "(exact, about three times the plan time on 22 goals) (session 34, docs/model.md)",
+    )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(
         0, ge=0, le=64,

@@ -248,24 +248,31 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
             v = v + like * decide(R, after, frozenset({q}), s.n - n_q, 1)
         out[a] = float(b0 @ v)
     watched = {}
-    p = b0[s.branches] / b0[s.branches].sum()
+    branches = [int(g) for g in s.branches]
+    # "mapped": every goal the belief holds, each outside the branches read through the child of the branch
+    # its predicted input is likeliest for; otherwise ("top", "all") the branches' own goals
+    over = [h for h in range(len(b0)) if b0[h] > 0] if cfg.planner.watch_branches == "mapped" else branches
     for w in s.watched:
         total = 0.0
-        for j, g in enumerate(s.branches):
+        for h in over:
+            g = h if h in branches else max(branches, key=lambda b: (R.loglik[0, h, w, b], -branches.index(b)))
             bc = _watched_belief(cfg, snap.goals.target_index, b0, R.loglik[0, g, w])
             kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
-            total += p[j] * (R.watch_return[0, g, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[g])
-        watched[s.moves[w]] = total
+            total += b0[h] * (R.watch_return[0, h, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[h])
+        watched[s.moves[w]] = total / sum(b0[h] for h in over)
     return out, watched
 
 
 @pytest.mark.parametrize("third", [False, True])
 @pytest.mark.parametrize("seed", range(12))
 def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, third):
+    """With fewer top goals than goals in half the problems (``top_goals = 2`` of Scene 1's four), so that
+    ``planner.watch_branches`` has goals outside the branches to average over or map."""
     rng = np.random.default_rng(seed)
     cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
                watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2],
-               watch_evidence=(1.0, 0.5, 0.0)[seed % 3])
+               watch_evidence=(1.0, 0.5, 0.0)[seed % 3], top_goals=(10, 2)[seed // 6],
+               watch_branches=("top", "mapped", "all")[seed % 3 if third else (seed + 1) % 3])
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
     asking = cfg.asking.model_copy(update={"third_answer": third})
     cfg = cfg.model_copy(update={"reward": reward, "asking": asking})

@@ -26,9 +26,13 @@ of that evidence and ``planner.watch_copy_evidence`` of it between copies of one
 (:func:`watched_beliefs`; by default half the evidence, and its split between copies as the rest: the
 input people give carries less than a user heading exactly to the goal, session 31). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
-earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), weighted by ``b``
-renormalised over them. Watched motions are HO, no-assist, and moves to the ``planner.watch_moves``
-most likely goals. Answers update the belief by Bayes with ``answer_p_correct``; question chains go as
+earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), one child each; by
+``planner.watch_branches`` a watch's value is averaged over them with ``b`` renormalised (``"top"``), or
+over every goal ``h`` ``b`` holds, as commits and questions are, a goal outside the branches read through
+the child of the branch its predicted input is likeliest for (``"mapped"``: ``W_x[h, w] +
+D(b'_gw, x'_gw, s - n_w)[h]`` with ``g = argmax loglik[h, w, .]`` over the branches), or with every such
+goal a branch of its own (``"all"``, exact, more children). Watched motions are HO, no-assist, and
+moves to the ``planner.watch_moves`` most likely goals. Answers update the belief by Bayes with ``answer_p_correct``; question chains go as
 deep as the horizon allows (``planner.max_questions`` at most, and less where a level would hold more
 than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once, and
 so are the children of branches that reach the same pose with the same belief (turning, goals that share
@@ -176,7 +180,8 @@ class WatchSearch:
             counts = np.bincount(goals.target_index, minlength=len(goals.targets))[goals.target_index]
             n_sib = np.array([len(set(goals.target_index[row])) for row in self.sib])
             self.eq_share = np.where(self.sib, 1.0 / np.maximum(n_sib[:, None] * counts[None, :], 1), 0.0)
-        self.branches = np.array([g for g in cands if self.b0[g] > 0], dtype=int)
+        held = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
+        self.branches = np.array([g for g in held if self.b0[g] > 0], dtype=int)
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
         self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
@@ -352,9 +357,28 @@ class WatchSearch:
         n = len(kids.beliefs)
         A = np.repeat(asked, n, axis=0)
         V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w)
+        if self.cfg.planner.watch_branches == "mapped":
+            return self._mapped_values(R, V, kids.of_branch.reshape(len(ws), len(g)))
         v = V[kids.of_branch, np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
         p = self.b0[g] / self.b0[g].sum()
         return {self.moves[w]: float(p @ (R.watch_return[0, g, w] + v[i])) for i, w in enumerate(ws)}
+
+    def _mapped_values(self, R: Rollouts, V: FloatArray, kid: np.ndarray) -> dict[Action, float]:
+        """``planner.watch_branches = "mapped"``: ``watch(w)`` averaged over every goal ``h`` the root belief
+        holds, as commits and questions are. A branch is its own child; any other goal is read through the
+        child of the branch ``g`` its predicted input is likeliest for (``argmax_g loglik[h, w, g]``), and
+        credited with the return that child's choice earns for ``h``. ``kid`` ``(W, branches)``: each
+        (motion, branch)'s child, rows of ``V``."""
+        g = self.branches
+        held = np.flatnonzero(self.b0 > 0)
+        slot = np.full(len(self.b0), -1)
+        slot[g] = np.arange(len(g))
+        out: dict[Action, float] = {}
+        for i, w in enumerate(self.watched):
+            rep = np.where(slot[held] >= 0, slot[held], R.loglik[0][held, w][:, g].argmax(axis=1))
+            value = R.watch_return[0, held, w] + V[kid[i, rep], held]
+            out[self.moves[w]] = float(self.b0[held] @ value / self.b0[held].sum())
+        return out
 
     # -- search ------------------------------------------------------------------------------------------
 
