@@ -266,6 +266,12 @@ class PlannerConfig(_Section):
         "top goal its predicted input is likeliest for (no more children); all: every goal its own child "
         "(exact, about three times the plan time on 22 goals) (session 34, docs/model.md)",
     )
+    root_goals: Literal["all", "top"] = Field(
+        "all",
+        description="watch model: the belief the root's commits and questions are averaged by. all: every goal "
+        "the belief holds; top: the belief renormalised over the watch's branches, so that with watch_branches "
+        "= top every root action is averaged over the same goals (session 34, docs/model.md)",
+    )
     rollout_step_s: float = Field(1.0, gt=0, le=1, description="watch model: integration step of the rollouts (s)")
     threads: int = Field(
         0, ge=0, le=64,

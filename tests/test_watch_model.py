@@ -241,12 +241,18 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         return best_v
 
     R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
-    out = {a: float(b0 @ R.value[0, :, i, s.n]) for i, a in enumerate(s.moves)}
+    root = b0.copy()  # the root's average: every goal, or (root_goals = "top") the branches renormalised
+    if cfg.planner.root_goals == "top":
+        outside = np.ones(len(b0), dtype=bool)
+        outside[s.branches] = False
+        root[outside] = 0.0
+        root /= root.sum()
+    out = {a: float(root @ R.value[0, :, i, s.n]) for i, a in enumerate(s.moves)}
     for q, a in enumerate(s.questions):
         v = r_q + n_q * R.stay[0]
         for like, after in _outcomes(cfg, snap.goals, a.target, b0):
             v = v + like * decide(R, after, frozenset({q}), s.n - n_q, 1)
-        out[a] = float(b0 @ v)
+        out[a] = float(root @ v)
     watched = {}
     branches = [int(g) for g in s.branches]
     # "mapped": every goal the belief holds, each outside the branches read through the child of the branch
@@ -272,7 +278,8 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, th
     cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0, max_questions=2,
                watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2],
                watch_evidence=(1.0, 0.5, 0.0)[seed % 3], top_goals=(10, 2)[seed // 6],
-               watch_branches=("top", "mapped", "all")[seed % 3 if third else (seed + 1) % 3])
+               watch_branches=("top", "mapped", "all")[seed % 3 if third else (seed + 1) % 3],
+               root_goals=("all", "top")[(seed // 3) % 2])
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
     asking = cfg.asking.model_copy(update={"third_answer": third})
     cfg = cfg.model_copy(update={"reward": reward, "asking": asking})

@@ -182,6 +182,12 @@ class WatchSearch:
             self.eq_share = np.where(self.sib, 1.0 / np.maximum(n_sib[:, None] * counts[None, :], 1), 0.0)
         held = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
         self.branches = np.array([g for g in held if self.b0[g] > 0], dtype=int)
+        self.b_root = self.b0
+        """The belief the root's commits and questions are averaged by: ``b`` (``planner.root_goals =
+        "all"``), or ``b`` renormalised over the branches (``"top"``), the watches' own average."""
+        if pc.root_goals == "top":
+            self.b_root = np.zeros_like(self.b0)
+            self.b_root[self.branches] = self.b0[self.branches] / self.b0[self.branches].sum()
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
         self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
@@ -323,7 +329,7 @@ class WatchSearch:
         if self.max_q < 1 or not self.questions or self.n < self.n_q:
             return {}
         Vq = self.question_vectors(R, np.zeros(1, dtype=int), self.b0[None], asked, asked.copy(), ~asked, self.n, 0)
-        return {int(q): float(self.b0 @ Vq[0, q]) for q in np.flatnonzero(~asked[0])}
+        return {int(q): float(self.b_root @ Vq[0, q]) for q in np.flatnonzero(~asked[0])}
 
     def child_beliefs(self, R: Rollouts, ws: list[int]) -> FloatArray:
         """``b'_gw`` for every watched motion ``w`` in ``ws`` and branch ``g``: ``(len(ws) * branches, G)``,
@@ -386,7 +392,7 @@ class WatchSearch:
         """Values of the root's commits and questions, and of its watched motions, searched before the
         deadline or budget; ``True`` if every watched motion was."""
         R = self.root_rollouts()
-        commit = self.b0 @ R.value[0, :, :, self.n]
+        commit = self.b_root @ R.value[0, :, :, self.n]
         values = {a: float(v) for a, v in zip(self.moves, commit, strict=True)}
         self.nodes += 1
         asked = np.zeros((1, len(self.questions)), dtype=bool)
