@@ -266,6 +266,13 @@ class PlannerConfig(_Section):
         "top goal its predicted input is likeliest for (no more children); all: every goal its own child "
         "(exact, about three times the plan time on 22 goals) (session 34, docs/model.md)",
     )
+    question_gate: Literal["none", "information"] = Field(
+        "none",
+        description="watch model: which questions a node may choose. none: any, by its value; information: only "
+        "one whose answers are worth more than its cost (-reward.question) over standing still as long and "
+        "deciding without them, so that a question is never chosen for the standing still alone, e.g. about a "
+        "target the belief has ruled out (session 34, docs/model.md)",
+    )
     root_goals: Literal["all", "top"] = Field(
         "all",
         description="watch model: the belief the root's commits and questions are averaged by. all: every goal "

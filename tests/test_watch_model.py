@@ -233,12 +233,20 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
             for q in range(len(s.questions)):
                 if q in asked:
                     continue
-                v = r_q + n_q * R.stay[0]
-                for like, after in _outcomes(cfg, snap.goals, s.questions[q].target, b):
-                    v = v + like * decide(R, after, asked | {q}, steps - n_q, depth + 1)
-                if b @ v > best_e:
+                v = ask(R, b, asked, q, steps, depth)
+                if v is not None and b @ v > best_e:
                     best_e, best_v = float(b @ v), v
         return best_v
+
+    def ask(R, b, asked: frozenset, q: int, steps: int, depth: int) -> np.ndarray | None:
+        """Question ``q``'s vector, or None where planner.question_gate = "information" closes it: its
+        answers' worth over standing still as long and deciding without them is not above -r_q."""
+        informed = sum(like * decide(R, after, asked | {q}, steps - n_q, depth + 1)
+                       for like, after in _outcomes(cfg, snap.goals, s.questions[q].target, b))
+        if cfg.planner.question_gate == "information":
+            if steps == n_q or b @ (informed - decide(R, b, asked, steps - n_q, depth + 1)) <= -r_q:
+                return None
+        return r_q + n_q * R.stay[0] + informed
 
     R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
     root = b0.copy()  # the root's average: every goal, or (root_goals = "top") the branches renormalised
@@ -249,10 +257,9 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         root /= root.sum()
     out = {a: float(root @ R.value[0, :, i, s.n]) for i, a in enumerate(s.moves)}
     for q, a in enumerate(s.questions):
-        v = r_q + n_q * R.stay[0]
-        for like, after in _outcomes(cfg, snap.goals, a.target, b0):
-            v = v + like * decide(R, after, frozenset({q}), s.n - n_q, 1)
-        out[a] = float(root @ v)
+        v = ask(R, b0, frozenset(), q, s.n, 0) if s.n >= n_q and s.max_q > 0 else None
+        if v is not None:
+            out[a] = float(root @ v)
     watched = {}
     branches = [int(g) for g in s.branches]
     # "mapped": every goal the belief holds, each outside the branches read through the child of the branch
@@ -279,7 +286,7 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, th
                watch_moves=int(rng.integers(0, 3)), watch_likelihood=("kc", "marginal")[seed % 2],
                watch_evidence=(1.0, 0.5, 0.0)[seed % 3], top_goals=(10, 2)[seed // 6],
                watch_branches=("top", "mapped", "all")[seed % 3 if third else (seed + 1) % 3],
-               root_goals=("all", "top")[(seed // 3) % 2])
+               root_goals=("all", "top")[(seed // 3) % 2], question_gate=("none", "information")[(seed // 2) % 2])
     reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.5]))})
     asking = cfg.asking.model_copy(update={"third_answer": third})
     cfg = cfg.model_copy(update={"reward": reward, "asking": asking})

@@ -167,6 +167,7 @@ class WatchSearch:
         in_t = (qi[:, None] == goals.target_index[None, :]).reshape(len(qi), len(goals))
         self.L_yes = np.where(in_t, p, 1.0 - p)
         self.third = cfg.asking.third_answer
+        self.gated = pc.question_gate == "information"
         if self.third:  # "yes, that object, but another grasp" (asking.third_answer; docs/model.md)
             qobj = np.array([target_object(q.target) for q in self.questions])
             gobj = np.array([g.object for g in goals.goals])
@@ -245,6 +246,8 @@ class WatchSearch:
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
                 or 2 * int(avail.sum()) > MAX_BATCH):
             return V, act
+        if steps == self.n_q and self.gated:  # no decision after the answer: no information worth anything
+            return V, act
         if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
             w = self._ask_last(R, c)
             eq = np.einsum("ng,ng->n", B, w)
@@ -252,6 +255,8 @@ class WatchSearch:
             better = avail.any(axis=1) & (eq > best)
             return np.where(better[:, None], w, V), np.where(better, len(self.moves) + q, act)
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
+        if self.gated:  # a closed question is -inf throughout (0 x -inf would be nan in the product)
+            avail = avail & np.isfinite(Vq[..., 0])
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
         better = eq[rows, q] > best
@@ -301,9 +306,14 @@ class WatchSearch:
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
+        informed = np.zeros_like(total)
         for i, (_, _, like) in enumerate(outcomes):
-            total = total + like * v[i * k:(i + 1) * k]
-        Vq[node, q] = total
+            informed = informed + like * v[i * k:(i + 1) * k]
+        Vq[node, q] = total + informed
+        if self.gated:  # only a question whose answers are worth more than its cost (module doc)
+            held, _ = self.decide(R, c, B, asked, yes, steps - self.n_q, depth + 1)
+            gain = np.einsum("kg,kg->k", Bn, informed - held[node])
+            Vq[node[gain <= -self.cfg.reward.question], q[gain <= -self.cfg.reward.question]] = -np.inf
         return Vq
 
     def _ask_last(self, R: Rollouts, c: np.ndarray) -> FloatArray:
@@ -325,11 +335,12 @@ class WatchSearch:
         return np.where(A, 0.0, np.where((m_sib > 0.0)[:, None], scaled, equal))
 
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
-        """Value of every question at the root (then the tracker's choices), by the root belief."""
-        if self.max_q < 1 or not self.questions or self.n < self.n_q:
+        """Value of every question at the root (then the tracker's choices), by the root belief; a question
+        the gate closes (``planner.question_gate``) is left out."""
+        if self.max_q < 1 or not self.questions or self.n < self.n_q or (self.gated and self.n == self.n_q):
             return {}
         Vq = self.question_vectors(R, np.zeros(1, dtype=int), self.b0[None], asked, asked.copy(), ~asked, self.n, 0)
-        return {int(q): float(self.b_root @ Vq[0, q]) for q in np.flatnonzero(~asked[0])}
+        return {int(q): float(self.b_root @ Vq[0, q]) for q in np.flatnonzero(~asked[0]) if np.isfinite(Vq[0, q]).all()}
 
     def child_beliefs(self, R: Rollouts, ws: list[int]) -> FloatArray:
         """``b'_gw`` for every watched motion ``w`` in ``ws`` and branch ``g``: ``(len(ws) * branches, G)``,
