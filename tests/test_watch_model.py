@@ -243,9 +243,9 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         answers' worth over standing still as long and deciding without them is not above -r_q."""
         informed = sum(like * decide(R, after, asked | {q}, steps - n_q, depth + 1)
                        for like, after in _outcomes(cfg, snap.goals, s.questions[q].target, b))
-        if cfg.planner.question_gate == "information":
-            if steps == n_q or b @ (informed - decide(R, b, asked, steps - n_q, depth + 1)) <= -r_q:
-                return None
+        if cfg.planner.question_gate == "information" and (
+                steps == n_q or b @ (informed - decide(R, b, asked, steps - n_q, depth + 1)) <= -r_q):
+            return None
         return r_q + n_q * R.stay[0] + informed
 
     R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
