@@ -31,8 +31,14 @@ earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for)
 over every goal ``h`` ``b`` holds, as commits and questions are, a goal outside the branches read through
 the child of the branch its predicted input is likeliest for (``"mapped"``: ``W_x[h, w] +
 D(b'_gw, x'_gw, s - n_w)[h]`` with ``g = argmax loglik[h, w, .]`` over the branches), or with every such
-goal a branch of its own (``"all"``, exact, more children). Watched motions are HO, no-assist, and
-moves to the ``planner.watch_moves`` most likely goals. Answers update the belief by Bayes with ``answer_p_correct``; question chains go as
+goal a branch of its own (``"all"``, exact, more children); ``planner.root_goals = "top"`` averages the
+root's commits and questions over the branches instead. Watched motions are HO, no-assist, and moves to
+the ``planner.watch_moves`` most likely goals. Answers update the belief by Bayes with
+``answer_p_correct``; with ``planner.question_gate = "information"`` a node may ask only where the answers
+are worth more than the question's cost over standing still as long and deciding without them,
+``b . (P(yes | g) D(b_yes) + P(no | g) D(b_no) - D(b))`` at ``s - n_q`` steps above ``-r_q``, so that a
+question is never chosen for the standing still alone (all three switches session 34, off; the default
+compares watches on other goals than commits and questions: ``docs/model.md``). Question chains go as
 deep as the horizon allows (``planner.max_questions`` at most, and less where a level would hold more
 than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once, and
 so are the children of branches that reach the same pose with the same belief (turning, goals that share
