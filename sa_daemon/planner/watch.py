@@ -187,14 +187,16 @@ class WatchSearch:
             counts = np.bincount(goals.target_index, minlength=len(goals.targets))[goals.target_index]
             n_sib = np.array([len(set(goals.target_index[row])) for row in self.sib])
             self.eq_share = np.where(self.sib, 1.0 / np.maximum(n_sib[:, None] * counts[None, :], 1), 0.0)
-        held = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
-        self.branches = np.array([g for g in held if self.b0[g] > 0], dtype=int)
+        pool = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
+        self.branches = np.array([g for g in pool if self.b0[g] > 0], dtype=int)
+        self.branch_weights = self.b0[self.branches] / self.b0[self.branches].sum()
+        """``b`` renormalised over the branches: a watch's average (``watch_branches`` "top", "all")."""
         self.b_root = self.b0
         """The belief the root's commits and questions are averaged by: ``b`` (``planner.root_goals =
-        "all"``), or ``b`` renormalised over the branches (``"top"``), the watches' own average."""
+        "all"``), or the branch weights (``"top"``), the watches' own average."""
         if pc.root_goals == "top":
             self.b_root = np.zeros_like(self.b0)
-            self.b_root[self.branches] = self.b0[self.branches] / self.b0[self.branches].sum()
+            self.b_root[self.branches] = self.branch_weights
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
         self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
@@ -288,8 +290,9 @@ class WatchSearch:
         L = self.L_yes  # (Q, G)
         node, q = np.nonzero(avail)
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
-        if steps == self.n_q:
-            Vq[node, q] = self._ask_last(R, c[node])
+        if steps == self.n_q:  # no decision after the answer: with the gate no question is worth its cost
+            if not self.gated:
+                Vq[node, q] = self._ask_last(R, c[node])
             return Vq
         total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
         Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
@@ -317,9 +320,9 @@ class WatchSearch:
             informed = informed + like * v[i * k:(i + 1) * k]
         Vq[node, q] = total + informed
         if self.gated:  # only a question whose answers are worth more than its cost (module doc)
-            held, _ = self.decide(R, c, B, asked, yes, steps - self.n_q, depth + 1)
-            gain = np.einsum("kg,kg->k", Bn, informed - held[node])
-            Vq[node[gain <= -self.cfg.reward.question], q[gain <= -self.cfg.reward.question]] = -np.inf
+            unasked, _ = self.decide(R, c, B, asked, yes, steps - self.n_q, depth + 1)
+            closed = np.einsum("kg,kg->k", Bn, informed - unasked[node]) <= -self.cfg.reward.question
+            Vq[node[closed], q[closed]] = -np.inf
         return Vq
 
     def _ask_last(self, R: Rollouts, c: np.ndarray) -> FloatArray:
@@ -343,7 +346,7 @@ class WatchSearch:
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
         """Value of every question at the root (then the tracker's choices), by the root belief; a question
         the gate closes (``planner.question_gate``) is left out."""
-        if self.max_q < 1 or not self.questions or self.n < self.n_q or (self.gated and self.n == self.n_q):
+        if self.max_q < 1 or not self.questions or self.n < self.n_q:
             return {}
         Vq = self.question_vectors(R, np.zeros(1, dtype=int), self.b0[None], asked, asked.copy(), ~asked, self.n, 0)
         return {int(q): float(self.b_root @ Vq[0, q]) for q in np.flatnonzero(~asked[0]) if np.isfinite(Vq[0, q]).all()}
@@ -383,7 +386,7 @@ class WatchSearch:
         if self.cfg.planner.watch_branches == "mapped":
             return self._mapped_values(R, V, kids.of_branch.reshape(len(ws), len(g)))
         v = V[kids.of_branch, np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
-        p = self.b0[g] / self.b0[g].sum()
+        p = self.branch_weights
         return {self.moves[w]: float(p @ (R.watch_return[0, g, w] + v[i])) for i, w in enumerate(ws)}
 
     def _mapped_values(self, R: Rollouts, V: FloatArray, kid: np.ndarray) -> dict[Action, float]:
@@ -393,14 +396,14 @@ class WatchSearch:
         credited with the return that child's choice earns for ``h``. ``kid`` ``(W, branches)``: each
         (motion, branch)'s child, rows of ``V``."""
         g = self.branches
-        held = np.flatnonzero(self.b0 > 0)
+        h = np.flatnonzero(self.b0 > 0)
         slot = np.full(len(self.b0), -1)
         slot[g] = np.arange(len(g))
         out: dict[Action, float] = {}
         for i, w in enumerate(self.watched):
-            rep = np.where(slot[held] >= 0, slot[held], R.loglik[0][held, w][:, g].argmax(axis=1))
-            value = R.watch_return[0, held, w] + V[kid[i, rep], held]
-            out[self.moves[w]] = float(self.b0[held] @ value / self.b0[held].sum())
+            rep = np.where(slot[h] >= 0, slot[h], R.loglik[0][h, w][:, g].argmax(axis=1))
+            value = R.watch_return[0, h, w] + V[kid[i, rep], h]
+            out[self.moves[w]] = float(self.b0[h] @ value / self.b0[h].sum())
         return out
 
     # -- search ------------------------------------------------------------------------------------------
