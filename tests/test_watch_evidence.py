@@ -20,7 +20,8 @@ from sa_daemon.geometry import Pose
 from sa_daemon.model.actions import NO_ASSIST
 from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.planner.snapshot import Snapshot
-from sa_daemon.planner.watch import WatchSearch, watched_beliefs
+from sa_daemon.planner.watch import WatchSearch
+from sa_daemon.planner.watched_beliefs import watched_beliefs
 
 TARGETS = np.array([0, 0, 0, 1, 2, 2])
 """Six goals: target 0 held as three copies, target 1 as one, target 2 as two."""

@@ -21,10 +21,11 @@ from sa_daemon.model.twists import (
     user_angular,
     user_linear,
 )
+from sa_daemon.planner.node_keys import distinct_rows
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
-from sa_daemon.planner.watch import WatchSearch, _distinct_rows
+from sa_daemon.planner.watch import WatchSearch
 from sa_daemon.world.scene import load_scene
 
 SCENE = load_scene("scene1")
@@ -431,7 +432,7 @@ def test_distinct_rows_are_numpys_unique_rows_in_order_of_appearance():
     rows = rng.integers(0, 3, (60, 4)).astype(float)
     rows[5] = -0.0 * rows[5]  # the same as row 5 was, with negative zeros where it had zeros
     rows[7] = rows[5] * 0.0
-    first, kid = _distinct_rows(rows)
+    first, kid = distinct_rows(rows)
     values, inverse = np.unique(rows, axis=0, return_inverse=True)
     assert len(first) == len(values)
     assert np.array_equal(rows[first][kid], rows)  # every row is its child's row

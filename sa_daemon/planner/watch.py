@@ -23,8 +23,8 @@ MaxEnt IOC likelihood of the joystick input predicted for that user, against eac
 (``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
 ``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`), taking ``planner.watch_evidence``
 of that evidence and ``planner.watch_copy_evidence`` of it between copies of one target
-(:func:`watched_beliefs`; by default half the evidence, and its split between copies as the rest: the
-input people give carries less than a user heading exactly to the goal, session 31). If the
+(:func:`~.watched_beliefs.watched_beliefs`; by default half the evidence, and its split between copies as
+the rest: the input people give carries less than a user heading exactly to the goal, session 31). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), one child each; by
 ``planner.watch_branches`` a watch's value is averaged over them with ``b`` renormalised (``"top"``), or
@@ -63,8 +63,10 @@ from ..model.actions import Action, ActionKind
 from ..model.huber import pregrasp_points
 from ..model.model import SharedAutonomyModel
 from ..world.goals import target_object
+from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
+from .watched_beliefs import watched_beliefs
 
 MAX_BATCH = 20_000
 """Beliefs one question level may hold; a deeper level than this is not searched (a depth limit)."""
@@ -72,69 +74,6 @@ GATHER_RATIO, MAX_GATHER = 4, 4_000_000
 """``decide`` values a batch by one ``(n, G, A)`` gather where it has more than one start pose per
 ``GATHER_RATIO`` nodes and the gather holds at most ``MAX_GATHER`` numbers, else by one matrix product
 per start pose."""
-
-
-def _answer_keys(start: np.ndarray, asked: np.ndarray, yes: np.ndarray) -> np.ndarray:
-    """One key per node from its start pose and its answer sets: a 1-D ``int64`` (start, asked bits,
-    yes bits) when they fit in 62 bits, else rows of bytes. Equal keys, equal beliefs."""
-    nq = asked.shape[1]
-    planes = [asked, yes] if yes.dtype == bool else [asked, yes == 1, yes == 2]  # third answer: 2 = "other"
-    if len(planes) * nq + int(start.max(initial=0)).bit_length() <= 62:
-        weights = np.left_shift(np.int64(1), np.arange(nq, dtype=np.int64))
-        key = start.astype(np.int64)
-        for plane in planes:
-            key = (key << nq) | (plane.astype(np.int64) @ weights)
-        return key
-    return np.concatenate((start[:, None].astype(np.int64).view(np.uint8).reshape(len(start), -1),
-                           *(np.packbits(plane, axis=1) for plane in planes)), axis=1)
-
-
-def _distinct_rows(rows: FloatArray) -> tuple[np.ndarray, np.ndarray]:
-    """The first row of each distinct value of ``rows`` ``(n, m)`` in order of appearance, and for every
-    row the index of its value among them (``np.unique(..., axis=0)``'s index and inverse, unsorted: a
-    dictionary of the rows' bytes, ten times faster on a plan's few dozen rows). ``+ 0.0`` makes ``-0.0``
-    and ``0.0`` the same bytes, as they are the same number."""
-    seen: dict[bytes, int] = {}
-    first: list[int] = []
-    kid = np.empty(len(rows), dtype=int)
-    for i, row in enumerate(np.ascontiguousarray(rows + 0.0)):
-        k = seen.setdefault(row.tobytes(), len(first))
-        if k == len(first):
-            first.append(i)
-        kid[i] = k
-    return np.array(first, dtype=int), kid
-
-
-def _posterior(b0: FloatArray, ll: FloatArray) -> FloatArray:
-    """Bayes: ``b0 * exp(ll)`` normalised per row of ``ll`` ``(m, G)``; goals ``b0`` rules out stay out."""
-    log_b = np.log(np.maximum(b0, 1e-300))[None] + ll
-    log_b -= log_b.max(axis=1, keepdims=True)
-    b = np.exp(log_b) * (b0 > 0)[None]
-    return b / b.sum(axis=1, keepdims=True)
-
-
-def watched_beliefs(b0: FloatArray, ll: FloatArray, target_index: np.ndarray, evidence: float = 1.0,
-                    copy_evidence: float = 1.0) -> FloatArray:
-    """The beliefs the watch expects after predicted input of log-likelihood ``ll`` ``(m, G)`` (nats, one
-    row a branch) from belief ``b0`` ``(G,)``. With ``lambda = evidence`` (``planner.watch_evidence``) and
-    ``kappa = copy_evidence`` (``planner.watch_copy_evidence``), for goal ``g`` of target ``t(g)``:
-
-        P(t)     = sum over g' in t of  b0[g'] exp(lambda ll[g'])  /  sum over all g' of the same
-        b'[g]    = P(t(g)) * b0[g] exp(kappa lambda ll[g])  /  sum over g' in t(g) of the same
-
-    so each target's mass is Bayes' rule on the input's tempered evidence, and the copies of a target
-    (resampled grasp poses, III-G) part by ``kappa`` of it: ``kappa = 1`` is Bayes' rule over the goals,
-    ``kappa = 0`` keeps ``b0``'s split among the copies."""
-    ll = evidence * ll
-    b = _posterior(b0, ll)
-    if copy_evidence == 1.0 or len(np.unique(target_index)) == len(target_index):
-        return b
-    onehot = target_index[:, None] == np.arange(int(target_index.max()) + 1)[None, :]  # (G, T)
-    mass = b @ onehot  # (m, T)
-    w = _posterior(b0, copy_evidence * ll)
-    within = w @ onehot
-    return mass[:, target_index] * np.divide(w, within[:, target_index], out=np.zeros_like(w),
-                                             where=within[:, target_index] > 0)
 
 
 @dataclass(frozen=True)
@@ -309,7 +248,7 @@ class WatchSearch:
         kid_c = np.tile(c[node], m)
         kid_a = np.tile(asked[node] | first_q, (m, 1))
         kid_y = np.concatenate([o[1] for o in outcomes])
-        keys = _answer_keys(kid_c, kid_a, kid_y)
+        keys = answer_keys(kid_c, kid_a, kid_y)
         _, first, inverse = np.unique(keys, axis=0 if keys.ndim > 1 else None, return_index=True,
                                       return_inverse=True)  # (axis=0 on 1-D keys: the same, slower)
         v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
@@ -368,7 +307,7 @@ class WatchSearch:
         quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
         # Turning, branches whose goals share an orientation are the same child (the user turns by the
         # goal's orientation alone, and the tracker reads the turn by it): each distinct one is searched once.
-        first, kid = _distinct_rows(np.concatenate((pos, quat, B), axis=1))
+        first, kid = distinct_rows(np.concatenate((pos, quat, B), axis=1))
         self.children = len(first)
         rollouts = self._rollouts(pos[first], quat[first], B[first], self.n - self.n_w, background=True)
         return _Children(rollouts, B[first], kid)
