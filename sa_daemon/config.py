@@ -298,6 +298,13 @@ class PlannerConfig(_Section):
         description="the smoothed speed over ticks without input: decay (averaged in as zero: a pausing user is "
         "predicted to stay still) or hold (left as it was: the speed the user moves at when it moves)",
     )
+    user_speed_unused: Literal["zero", "deflection"] = Field(
+        "zero",
+        description="the predicted speed in a mode the user has not been in yet in this task: zero (the user is "
+        "predicted not to move in it: at the first switch to rotation a watch expects no evidence) or deflection "
+        "(the stick held as far as in the other mode: v_other / scale_other x scale_this, input.*_scale_*; "
+        "session 35, docs/model.md)",
+    )
 
 
 class InputConfig(_Section):

@@ -36,6 +36,7 @@ from ..world.goalset import GoalSet
 from .lowpass import LowPass
 from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
 from .safety import SafetyPipeline
+from .user_speed import UserSpeed
 from .withdrawal import AnswerWithdrawal
 from .yielding import OppositionWindow, near_object, user_opposes
 
@@ -68,8 +69,9 @@ class Controller:
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
         self._input_seq = 0
-        self._speed = np.zeros(2)  # smoothed user speed (m/s, rad/s)
-        self._t_speed = -math.inf
+        pc = cfg.planner
+        self._speed = UserSpeed(pc.user_speed_tau_s, pc.user_speed_idle, pc.user_speed_unused,
+                                (cfg.input.linear_scale_mps, cfg.input.angular_scale_radps))
         self._assist = True
         self._gripper_closed = False
         self._last = IDLE_TICK
@@ -160,8 +162,9 @@ class Controller:
     @property
     def user_speed(self) -> tuple[float, float]:
         """The user's smoothed speed ``(linear m/s, angular rad/s)``: each an exponential average, time
-        constant ``planner.user_speed_tau_s``, of the twist's norm over the belief ticks in its mode."""
-        return float(self._speed[0]), float(self._speed[1])
+        constant ``planner.user_speed_tau_s``, of the twist's norm over the belief ticks in its mode
+        (:mod:`.user_speed`)."""
+        return self._speed.value
 
     def input_fresh(self, t: float) -> bool:
         """An input sample arrived within ``safety.stale_command_s`` of ``t``."""
@@ -229,13 +232,7 @@ class Controller:
             return False
         u = self.user_twist
         self._belief = self._model.update_input(self._belief, pose, u)
-        dt = min(max(t - self._t_speed, 0.0), 0.1)  # (a tick after a gap weighs as 0.1 s)
-        self._t_speed = t
-        k = 1.0 - math.exp(-dt / self._cfg.planner.user_speed_tau_s)
-        i = 0 if self._mode is Mode.TRANSLATION else 1
-        speed = float(np.linalg.norm(u[3 * i:3 * i + 3]))
-        if speed > 0.0 or self._cfg.planner.user_speed_idle == "decay":
-            self._speed[i] += k * (speed - self._speed[i])
+        self._speed.update(u, 0 if self._mode is Mode.TRANSLATION else 1, t)
         return True
 
     # -- questions ---------------------------------------------------------------------------------------
@@ -342,8 +339,7 @@ class Controller:
         self._asked.clear()
         self._question = None
         self.drop_plan()
-        self._speed = np.zeros(2)
-        self._t_speed = -math.inf
+        self._speed.reset()
         self._mode = Mode.TRANSLATION
         self._gripper_closed = False
         self._opposition.clear()
