@@ -54,12 +54,12 @@ def without_questions(result):
 
 def run(scene, task: str, user: str, seed: int, cfg, veto: tuple[float, float] | None = None):
     """One policy trial; with ``veto = (t0, t1)`` no question is adopted at ``t0 <= t < t1``. Returns the
-    trial and, per plan that chose a question, ``(t, margin)``."""
-    chosen: list[tuple[float, float]] = []
+    trial and, per plan that chose a question, ``(t, margin, mode, user_speed)``."""
+    chosen: list[tuple[float, float, str, tuple[float, float]]] = []
 
     def on_plan(t, snap, result):
         if result.action.kind is ActionKind.QUESTION:
-            chosen.append((t, margin(result)))
+            chosen.append((t, margin(result), snap.mode.value, snap.user_speed))
 
     original = Controller.accept_plan
 
@@ -98,15 +98,18 @@ def main() -> None:
                 trial, chosen = run(scene, task, user, seed, cfg)
                 for rec in trial.asked:
                     t_q = rec["t"]
-                    m = next((mm for tt, mm in chosen if abs(tt - t_q) < 1e-9), math.nan)
+                    _, m, mode, speed = next((c for c in chosen if abs(c[0] - t_q) < 1e-9),
+                                             (t_q, math.nan, "", (math.nan, math.nan)))
                     alt, _ = run(scene, task, user, seed, cfg, veto=(t_q, t_q + window))
                     row = {"task": task, "user": user, "seed": seed, "t": t_q, "target": rec["target"],
                            "p_max": rec["p_max"], "object_rank": rec["object_rank"], "margin": m,
+                           "mode": mode, "user_speed": list(speed),
                            "success": trial.success, "time_s": trial.completion_time_s,
                            "questions": trial.questions, "veto_success": alt.success,
                            "veto_time_s": alt.completion_time_s, "veto_questions": alt.questions}
                     rows.append(row)
-                    print(f"{task:22} {user:18} {seed:4} t {t_q:5.1f} {rec['target']:24} p {rec['p_max']:.2f} "
+                    print(f"{task:22} {user:18} {seed:4} t {t_q:5.1f} {rec['target']:24} p {rec['p_max']:.2f} {mode[:5]} "
+                          f"v {speed[0]:.3f} m/s {speed[1]:.3f} rad/s "
                           f"margin {m:7.1f}  asked {trial.completion_time_s:5.1f} s ({trial.questions} q, "
                           f"{'ok' if trial.success else 'FAIL'})  vetoed {alt.completion_time_s:5.1f} s "
                           f"({alt.questions} q, {'ok' if alt.success else 'FAIL'})", flush=True)
@@ -122,6 +125,11 @@ def main() -> None:
             sel = (margins >= lo) & (margins < hi)
             if sel.any():
                 print(f"  margin [{lo}, {hi}): {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s")
+        still = np.array([r["mode"] == "rotation" and r["user_speed"][1] < 1e-3 for r in both])
+        for label, sel in (("in rotation, predicted not to turn", still), ("otherwise", ~still)):
+            if sel.any():
+                print(f"  {label}: {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s, "
+                      f"margin median {np.median(margins[sel]):.1f}")
     lost = sum(r["success"] and not r["veto_success"] for r in rows)
     gained = sum(r["veto_success"] and not r["success"] for r in rows)
     print(f"failures without the question: {lost} added, {gained} mended")
