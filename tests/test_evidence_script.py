@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "results" / "evidence.py"
 _spec = importlib.util.spec_from_file_location("results_evidence", SCRIPT)
 evidence = importlib.util.module_from_spec(_spec)
@@ -30,4 +32,13 @@ def test_the_script_prints_a_slope_per_user_and_pooled(tmp_path):
                           "--json", str(out)], capture_output=True, text=True, timeout=600, check=True)
     lines = run.stdout.splitlines()
     assert lines[1].split()[0] == "confident" and lines[-1].split()[0] == "pooled"
-    assert out.read_text().count('"lambda"') == 4  # in all, and by move / ho / none
+    assert out.read_text().count('"lambda"') == 6  # in all, by move / ho / none, by translation / rotation
+
+
+def test_the_windows_split_by_mode_add_up_to_all_of_them():
+    """Each window counts once, in the mode of its start: the two modes' sums are the whole's."""
+    m = evidence.measure("calibrated", range(1))
+    assert m["translation"]["windows"] + m["rotation"]["windows"] == m["windows"]
+    assert m["translation"]["windows"] > 0 and m["rotation"]["windows"] > 0
+    assert (m["translation"]["predicted_sq"] + m["rotation"]["predicted_sq"]
+            == pytest.approx(m["predicted_sq"], rel=1e-9))

@@ -30,7 +30,8 @@ import numpy as np
 from sa_daemon.config import Config, load_config
 from sa_daemon.model.actions import ActionKind
 from sa_daemon.model.model import SharedAutonomyModel
-from sa_daemon.planner.watch import WatchSearch, watched_beliefs
+from sa_daemon.planner.watch import WatchSearch
+from sa_daemon.planner.watched_beliefs import watched_beliefs
 from sa_daemon.sim.episode import run_trial
 from sa_daemon.sim.users import builtin_user_names, load_user
 from sa_daemon.world.scene import load_scene
@@ -46,8 +47,9 @@ def _target_masses(goals, probs: np.ndarray, targets: tuple[str, ...]) -> np.nda
     return np.maximum([by_name.get(t, 0.0) for t in targets], 1e-6)
 
 
-def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tuple[float, float, str]]:
-    """One policy trial's windows: ``(sum realised * predicted, sum predicted^2, motion kind)`` each."""
+def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tuple[float, float, str, str]]:
+    """One policy trial's windows: ``(sum realised * predicted, sum predicted^2, motion kind, joystick
+    mode)`` each."""
     model = SharedAutonomyModel(cfg)
     plans: list = []
     run_trial(load_scene(scene), task, "policy", seed, cfg, user_name=user,
@@ -80,12 +82,13 @@ def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tu
         P1 = _target_masses(plans[j][1].goals, plans[j][1].probs, goals.targets)
         realised = np.log(P1[T] / P1) - np.log(P0[T] / P0)
         out.append((float(predicted[others] @ realised[others]), float(predicted[others] @ predicted[others]),
-                    result.action.kind.value))
+                    result.action.kind.value, snap.mode.value))
     return out
 
 
 def measure(user: str, seeds: range, config: str | None = None) -> dict:
-    """``lambda`` for one user over :data:`TASKS` x ``seeds``, in all and by the motion chosen."""
+    """``lambda`` for one user over :data:`TASKS` x ``seeds``, in all, by the motion chosen and by the
+    joystick mode of the window's start (translation, rotation)."""
     cfg = load_user(user).apply(load_config(config))
     rows = [w for scene, task in TASKS for s in seeds for w in windows(cfg, scene, task, s, user)]
     out = {"windows": len(rows), "realised_x_predicted": sum(r[0] for r in rows),
@@ -94,6 +97,11 @@ def measure(user: str, seeds: range, config: str | None = None) -> dict:
     for kind in ("move", "ho", "none"):
         sel = [r for r in rows if r[2] == kind]
         out[kind] = {"windows": len(sel), "lambda": sum(r[0] for r in sel) / max(sum(r[1] for r in sel), 1e-12)}
+    for mode in ("translation", "rotation"):
+        sel = [r for r in rows if r[3] == mode]
+        out[mode] = {"windows": len(sel), "realised_x_predicted": sum(r[0] for r in sel),
+                     "predicted_sq": sum(r[1] for r in sel)}
+        out[mode]["lambda"] = out[mode]["realised_x_predicted"] / max(out[mode]["predicted_sq"], 1e-12)
     return out
 
 
@@ -107,14 +115,19 @@ def main() -> None:
     a = ap.parse_args()
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     result = {}
-    print(f"{'user':18} {'windows':>7} {'lambda':>7} {'move':>6} {'ho':>6} {'none':>6}")
+    print(f"{'user':18} {'windows':>7} {'lambda':>7} {'move':>6} {'ho':>6} {'none':>6} {'transl.':>14} {'rotation':>14}")
     for user in a.user or builtin_user_names():
         m = result[user] = measure(user, seeds, a.config)
+        by_mode = " ".join(f"{m[k]['lambda']:6.2f} ({m[k]['windows']:4d})" for k in ("translation", "rotation"))
         print(f"{user:18} {m['windows']:7d} {m['lambda']:7.2f} {m['move']['lambda']:6.2f} {m['ho']['lambda']:6.2f} "
-              f"{m['none']['lambda']:6.2f}", flush=True)
-    num = sum(m["realised_x_predicted"] for m in result.values())
-    den = sum(m["predicted_sq"] for m in result.values())
-    print(f"{'pooled':18} {sum(m['windows'] for m in result.values()):7d} {num / max(den, 1e-12):7.2f}")
+              f"{m['none']['lambda']:6.2f} {by_mode}", flush=True)
+    pooled = []
+    for k in (None, "translation", "rotation"):
+        ms = [m if k is None else m[k] for m in result.values()]
+        num, den = sum(m["realised_x_predicted"] for m in ms), sum(m["predicted_sq"] for m in ms)
+        pooled.append((sum(m["windows"] for m in ms), num / max(den, 1e-12)))
+    print(f"{'pooled':18} {pooled[0][0]:7d} {pooled[0][1]:7.2f} {'':20} "
+          + " ".join(f"{lam:6.2f} ({n:4d})" for n, lam in pooled[1:]))
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"seeds": [seeds.start, seeds.stop], "users": result}, f, indent=1)
