@@ -267,11 +267,12 @@ class PlannerConfig(_Section):
         "(exact, about three times the plan time on 22 goals) (session 34, docs/model.md)",
     )
     question_gate: Literal["none", "information"] = Field(
-        "none",
+        "information",
         description="watch model: which questions a node may choose. none: any, by its value; information: only "
         "one whose answers are worth more than its cost (-reward.question) over standing still as long and "
         "deciding without them, so that a question is never chosen for the standing still alone, e.g. about a "
-        "target the belief has ruled out (session 34, docs/model.md)",
+        "target the belief has ruled out (session 34; the default since session 35, by rule s32 on seeds 1000+, "
+        "docs/results.md)",
     )
     root_goals: Literal["all", "top"] = Field(
         "all",

@@ -37,8 +37,9 @@ the ``planner.watch_moves`` most likely goals. Answers update the belief by Baye
 ``answer_p_correct``; with ``planner.question_gate = "information"`` a node may ask only where the answers
 are worth more than the question's cost over standing still as long and deciding without them,
 ``b . (P(yes | g) D(b_yes) + P(no | g) D(b_no) - D(b))`` at ``s - n_q`` steps above ``-r_q``, so that a
-question is never chosen for the standing still alone (all three switches session 34, off; the default
-compares watches on other goals than commits and questions: ``docs/model.md``). Question chains go as
+question is never chosen for the standing still alone (all three switches session 34; the gate the
+default since session 35, the other two off: the default compares watches on other goals than commits
+and questions, ``docs/model.md``). Question chains go as
 deep as the horizon allows (``planner.max_questions`` at most, and less where a level would hold more
 than ``MAX_BATCH`` beliefs); beliefs reached by the same answers in another order are decided once, and
 so are the children of branches that reach the same pose with the same belief (turning, goals that share
