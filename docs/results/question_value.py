@@ -32,11 +32,8 @@ from sa_daemon.config import load_config
 from sa_daemon.control.controller import Controller
 from sa_daemon.model.actions import ActionKind
 from sa_daemon.sim.episode import run_trial
-from sa_daemon.sim.users import load_user
+from sa_daemon.sim.users import builtin_user_names, load_user
 from sa_daemon.world.scene import load_scene
-
-USERS = ("calibrated", "confident", "rotate-first", "imprecise", "hasty", "own-pose", "own-pose-off-list",
-         "hesitant")
 
 
 def margin(result) -> float:
@@ -81,7 +78,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scene", required=True)
     ap.add_argument("--task", action="append", required=True)
-    ap.add_argument("--user", action="append")
+    ap.add_argument("--user", action="append", help="repeatable; default all the built-in users")
     ap.add_argument("--first-seed", type=int, default=300)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--config")
@@ -93,7 +90,7 @@ def main() -> None:
     scene = load_scene(args.scene)
     rows = []
     for task in args.task:
-        for user in args.user or USERS:
+        for user in args.user or builtin_user_names():
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 trial, chosen = run(scene, task, user, seed, cfg)
                 for rec in trial.asked:

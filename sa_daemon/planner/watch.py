@@ -194,9 +194,9 @@ class WatchSearch:
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
                 or 2 * int(avail.sum()) > MAX_BATCH):
             return V, act
-        if steps == self.n_q and self.gated:  # no decision after the answer: no information worth anything
-            return V, act
         if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
+            if self.gated:  # no decision after the answer: no information worth anything
+                return V, act
             w = self._ask_last(R, c)
             eq = np.einsum("ng,ng->n", B, w)
             q = avail.argmax(axis=1)
