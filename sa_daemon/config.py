@@ -101,11 +101,13 @@ class IntentConfig(_Section):
         "target's most probable copy (screened in session 30 and left off; docs/model.md, Copies that share "
         "one k_c)",
     )
-    copy_weights: Literal["equal", "poses"] = Field(
+    copy_weights: Literal["equal", "poses", "input"] = Field(
         "equal",
         description="a target's probability over the copies resampling makes of it (section III-G): equal = "
         "the same share each; poses = each copy's share of the target's grasp-pose weights exp(-V) at the "
-        "gripper, so the next input's likelihood is the same before and after (docs/model.md)",
+        "gripper, so the next input's likelihood is the same before and after; input = each copy's share of "
+        "the target's posterior over its grasp poses from the input since the last resampling, so a split "
+        "keeps what the input said about the pose (docs/model.md)",
     )
 
     @property
@@ -251,6 +253,12 @@ class PlannerConfig(_Section):
         "takes. 1 = all of it, a user heading exactly to the goal (until session 31); the population's input "
         "gives 0.08-1.00 of it (docs/results/evidence.py); 0.5 adopted by session 29's rule on fresh seeds "
         "(session 31, docs/model.md)",
+    )
+    watch_evidence_rotation: float | None = Field(
+        None, ge=0, le=1,
+        description="watch model: the share in rotation mode, where it differs from watch_evidence (None: the "
+        "same). The population's turning gives less of what the watch predicts than its translating, and on "
+        "the drill's orientation twins far less (docs/results/evidence.py by mode; docs/model.md, session 36)",
     )
     watch_copy_evidence: float = Field(
         1.0, ge=0, le=1,

@@ -859,3 +859,34 @@ def test_the_anchor_survives_answers_and_resampling():
     for after in (b.after_answer("object1:top", False, CHARGED), b.after_answer("object0:top", True, CHARGED),
                   b.resampled(GRIPPER, CHARGED)):
         np.testing.assert_array_equal(after.anchor, TILTED.position)
+
+
+def test_copies_weighted_by_the_input_keep_what_it_said_about_the_pose():
+    """``intent.copy_weights = "input"``: resampling gives each copy its share of the target's posterior
+    over its grasp poses from the input since the last resampling (:attr:`Belief.pose_log_w`), so input
+    that pointed at one of the target's poses still points there after the split, and each copy keeps
+    its own poses' posterior; with ``"equal"`` every copy starts at the same share. Target
+    probabilities are preserved either way."""
+    gs = GoalSet((top_goal("a", offset(dx=-0.06), offset(dy=0.06), offset(dy=-0.06)),
+                  top_goal("b", offset(dx=0.15)), top_goal("c", offset(dz=0.15)), top_goal("d", offset(dx=0.15, dz=0.1))))
+    u = np.array([-0.1, 0.0, 0.0, 0.0, 0.0, 0.0])  # toward a's first pose (-x), away from every other goal
+    shares = {}
+    for weights in ("input", "equal"):
+        cfg = MARGINAL.model_copy(update={"copy_weights": weights})
+        b = Belief.uniform(gs)
+        for _ in range(10):
+            b = b.after_input(GRIPPER, u, cfg)
+        assert (b.pose_log_w is not None) == (weights == "input")
+        if weights == "input":  # the input's posterior over a's poses: its first pose well ahead
+            w = np.exp(b.pose_log_w[0])
+            assert w[0] > 0.5 and w[0] > 2 * max(w[1], w[2])
+        r = b.resampled(GRIPPER, cfg)
+        assert r is not b and [g.target for g in r.goals.goals].count("a:top") == 3
+        assert r.target_probabilities()["a:top"] == pytest.approx(b.target_probabilities()["a:top"], abs=1e-12)
+        copies = {tuple(np.round(g.poses[0].position, 6)): p for g, p in zip(r.goals.goals, r.probs) if g.target == "a:top"}
+        shares[weights] = copies[tuple(np.round(offset(dx=-0.06), 6))] / r.target_probabilities()["a:top"]
+        if weights == "input":  # each copy owns one pose here, so its posterior over its poses is certain
+            own = r.pose_log_w[r.goals.target_mask("a:top")]
+            assert np.allclose(np.exp(own).max(axis=1), 1.0)
+    assert shares["equal"] == pytest.approx(1 / 3)
+    assert shares["input"] > 0.5

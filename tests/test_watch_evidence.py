@@ -10,6 +10,8 @@ watch takes half the evidence (``watch_evidence = 0.5``), split between copies a
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from test_watch_likelihood import TOP, split_cup
@@ -17,11 +19,13 @@ from test_watch_model import _reference_values
 
 from sa_daemon.config import ConfigError, config_from_dict
 from sa_daemon.geometry import Pose
-from sa_daemon.model.actions import NO_ASSIST
+from sa_daemon.model.actions import NO_ASSIST, Mode
 from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.watch import WatchSearch
 from sa_daemon.planner.watched_beliefs import watched_beliefs
+from sa_daemon.world.goals import Goal, GraspType
+from sa_daemon.world.goalset import GoalSet
 
 TARGETS = np.array([0, 0, 0, 1, 2, 2])
 """Six goals: target 0 held as three copies, target 1 as one, target 2 as two."""
@@ -112,7 +116,38 @@ def test_watching_is_worth_less_when_the_copies_are_not_expected_to_part():
     assert values[0.0][0] == values[1.0][0]
 
 
-@pytest.mark.parametrize("key", ["watch_evidence", "watch_copy_evidence"])
+def _cup_top_or_side(mode: Mode) -> Snapshot:
+    """The cup's top and side grasps at 0.45 / 0.45 (a bowl 0.1), the gripper 8 cm off, half turned
+    between them: turning tells the two grasps apart, and so does translating."""
+    c = np.array([0.45, 0.05, 0.25])
+    goals = GoalSet((Goal("cup", GraspType.TOP, (Pose.from_rpy(c, TOP),)),
+                     Goal("cup", GraspType.SIDE, (Pose.from_rpy(c + [-0.03, 0, 0], (math.pi / 2, 0, -math.pi / 2)),)),
+                     Goal("bowl", GraspType.TOP, (Pose.from_rpy([0.38, 0.30, 0.23], TOP),))))
+    return Snapshot(goals, np.array([0.45, 0.45, 0.1]), Pose.from_rpy(c + [-0.05, 0, 0.08], (3 * math.pi / 4, 0, -math.pi / 4)),
+                    np.zeros(6), mode=mode, budget_s=None, node_budget=400, user_speed=(0.06, 0.3))
+
+
+@pytest.mark.parametrize("mode", [Mode.TRANSLATION, Mode.ROTATION])
+def test_the_rotation_share_is_the_share_in_rotation_mode_only(mode):
+    """``planner.watch_evidence_rotation``: in rotation mode the watch takes that share of the predicted
+    evidence (the same values as ``watch_evidence`` set to it), in translation mode it changes nothing;
+    unset, rotation takes ``watch_evidence``."""
+    snap = _cup_top_or_side(mode)
+
+    def watch(**planner):
+        return WatchSearch(SharedAutonomyModel(_cfg(**planner)), snap).run()[1]
+
+    rotation_share, same_share, default = watch(watch_evidence_rotation=0.0), watch(watch_evidence=0.0), watch()
+    assert watch(watch_evidence_rotation=0.5) == default  # 0.5: watch_evidence's default
+    if mode is Mode.ROTATION:
+        assert rotation_share == same_share
+        assert max(abs(rotation_share[a] - default[a]) for a in default) > 50.0
+    else:
+        assert rotation_share == default
+        assert max(abs(same_share[a] - default[a]) for a in default) > 50.0
+
+
+@pytest.mark.parametrize("key", ["watch_evidence", "watch_copy_evidence", "watch_evidence_rotation"])
 @pytest.mark.parametrize("value", [-0.1, 1.5, "most"])
 def test_a_share_outside_zero_to_one_is_refused_by_name(key, value):
     with pytest.raises(ConfigError, match=rf"planner\.{key}"):

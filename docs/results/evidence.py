@@ -1,10 +1,12 @@
 """How much of the evidence the watch model predicts does a user's input give?
 
     python docs/results/evidence.py [--user U ...] [--first-seed 300] [--seeds 5] [--config FILE] [--json OUT]
+                                    [--scene S --task T ...]
 
 The watch search (``planner/watch.py``) predicts, for a user heading to goal ``g``, the joystick input of
 the next ``planner.watch_s`` and the belief the tracker will reach reading it. This runs policy trials as
-``sa-daemon eval`` does (Table I's ``cup:top`` and the simple study's three tasks, kinematic arm) and, at
+``sa-daemon eval`` does (Table I's ``cup:top`` and the simple study's three tasks, or ``--scene``'s
+``--task`` tasks; kinematic arm) and, at
 every plan that is not a question and is followed by no question for ``watch_s``, compares two changes of
 the log-odds of the user's true target ``T`` against every other target ``t`` (both above 1e-3):
 
@@ -86,11 +88,12 @@ def windows(cfg: Config, scene: str, task: str, seed: int, user: str) -> list[tu
     return out
 
 
-def measure(user: str, seeds: range, config: str | None = None) -> dict:
-    """``lambda`` for one user over :data:`TASKS` x ``seeds``, in all, by the motion chosen and by the
-    joystick mode of the window's start (translation, rotation)."""
+def measure(user: str, seeds: range, config: str | None = None,
+            tasks: tuple[tuple[str, str], ...] = TASKS) -> dict:
+    """``lambda`` for one user over ``tasks`` (``(scene, task)`` pairs) x ``seeds``, in all, by the motion
+    chosen and by the joystick mode of the window's start (translation, rotation)."""
     cfg = load_user(user).apply(load_config(config))
-    rows = [w for scene, task in TASKS for s in seeds for w in windows(cfg, scene, task, s, user)]
+    rows = [w for scene, task in tasks for s in seeds for w in windows(cfg, scene, task, s, user)]
     out = {"windows": len(rows), "realised_x_predicted": sum(r[0] for r in rows),
            "predicted_sq": sum(r[1] for r in rows)}
     out["lambda"] = out["realised_x_predicted"] / max(out["predicted_sq"], 1e-12)
@@ -112,12 +115,17 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--config", default=None)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--scene", help="measure this scene's --task tasks instead of Table I's and the simple study's")
+    ap.add_argument("--task", action="append", default=[], help="with --scene; repeatable")
     a = ap.parse_args()
+    if bool(a.scene) != bool(a.task):
+        ap.error("--scene and --task go together")
+    tasks = tuple((a.scene, t) for t in a.task) or TASKS
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     result = {}
     print(f"{'user':18} {'windows':>7} {'lambda':>7} {'move':>6} {'ho':>6} {'none':>6} {'transl.':>14} {'rotation':>14}")
     for user in a.user or builtin_user_names():
-        m = result[user] = measure(user, seeds, a.config)
+        m = result[user] = measure(user, seeds, a.config, tasks)
         by_mode = " ".join(f"{m[k]['lambda']:6.2f} ({m[k]['windows']:4d})" for k in ("translation", "rotation"))
         print(f"{user:18} {m['windows']:7d} {m['lambda']:7.2f} {m['move']['lambda']:6.2f} {m['ho']['lambda']:6.2f} "
               f"{m['none']['lambda']:6.2f} {by_mode}", flush=True)
@@ -130,7 +138,8 @@ def main() -> None:
           + " ".join(f"{lam:6.2f} ({n:4d})" for n, lam in pooled[1:]))
     if a.json:
         with open(a.json, "w") as f:
-            json.dump({"seeds": [seeds.start, seeds.stop], "users": result}, f, indent=1)
+            json.dump({"seeds": [seeds.start, seeds.stop], "tasks": [list(t) for t in tasks], "users": result}, f,
+                      indent=1)
 
 
 if __name__ == "__main__":

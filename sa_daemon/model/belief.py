@@ -73,7 +73,8 @@ class Belief:
     confirmed: str | None = None
     ruled_out: frozenset[str] = frozenset()
     pose_log_w: FloatArray | None = None
-    """``intent.poses = "tracked"`` or ``intent.reach_pose`` not ``"closest"``: each goal's posterior over its own
+    """``intent.poses = "tracked"``, ``intent.reach_pose`` not ``"closest"`` or ``intent.copy_weights =
+    "input"``: each goal's posterior over its own
     grasp poses from the input since the last resampling, ``(G, K)`` log-weights normalised per goal
     (``-inf`` on padding); ``None``: uniform over its poses."""
     anchor: FloatArray | None = None
@@ -158,7 +159,7 @@ class Belief:
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
         its lowest-value one alone (``intent.poses``). The pose posterior is kept whenever ``poses`` or
-        ``reach_pose`` is not ``closest``.
+        ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -168,7 +169,7 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
-        if cfg.poses == "tracked" or cfg.reach_pose != "closest":
+        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights == "input":
             # Bayes over each goal's poses, from uniform, along the whole input
             per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()
@@ -275,24 +276,55 @@ class Belief:
         tp = self.target_probabilities()
         alloc = self.copy_allocation()
         pools = self._pose_pools()
+        posterior = self._pose_pool_posteriors() if cfg.copy_weights == "input" else None
         first = {}
         for g in self.goals.goals:
             first.setdefault(g.target, g)
         goals: list[Goal] = []
         probs: list[float] = []
+        inner: list[FloatArray] = []  # under "input": each new copy's posterior over its own poses
         for t in self.goals.targets:
             template, n = first[t], alloc[t]
             poses = pools[t]
             pooled = template.with_poses(tuple(poses))
             idx = np.argsort(pooled.pose_distances(pose, cfg.rotation_weight_m_per_rad), kind="stable")
-            share = None  # equal shares; else the marginal tracker's weights of the target's poses, here
-            if cfg.copy_weights == "poses":
+            share = None  # equal shares; else the marginal tracker's weights of the target's poses, here,
+            if cfg.copy_weights == "poses":  # or the target's posterior over its poses from the input
                 share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
                                                 pooled.quats_wxyz[None], cfg)[0])
+            elif posterior is not None:
+                share = posterior[t]
             for i in range(n):
                 own = idx[i:] if i == n - 1 else idx[i:i + 1]
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
+                if posterior is not None:
+                    inner.append(share[own] / max(share[own].sum(), 1e-300))
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        # pose weights uniform again, as the copies are
-        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out, anchor=self.anchor)
+        # pose weights uniform again, as the copies are (under "input" each copy keeps its poses' posterior)
+        return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
+                      pose_log_w=None if posterior is None else _padded_log(inner, out.goals.pose_mask),
+                      anchor=self.anchor)
+
+    def _pose_pool_posteriors(self) -> dict[str, FloatArray]:
+        """Each target's posterior over its grasp poses, in :meth:`_pose_pools`' order: a copy's
+        probability times its posterior over its own poses (:attr:`pose_log_w`), normalised per target."""
+        log_w = self.pose_weights() + self.log_p[:, None]
+        pools: dict[str, list[FloatArray]] = {t: [] for t in self.goals.targets}
+        for i, g in enumerate(self.goals.goals):
+            pools[g.target].append(log_w[i, :len(g.poses)])
+        out = {}
+        for t, parts in pools.items():
+            lw = np.concatenate(parts)
+            out[t] = np.exp(lw - log_sum_exp(lw)) if np.isfinite(lw).any() else np.full(len(lw), 1.0 / len(lw))
+        return out
+
+
+def _padded_log(rows: list[FloatArray], mask: np.ndarray) -> FloatArray:
+    """``log`` of per-goal pose weights ``rows`` laid out as ``mask`` ``(G, K)`` (``-inf`` on padding)."""
+    out = np.full(mask.shape, -np.inf)
+    with np.errstate(divide="ignore"):
+        for i, r in enumerate(rows):
+            out[i, :len(r)] = np.log(r)
+    out.setflags(write=False)
+    return out

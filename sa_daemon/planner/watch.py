@@ -22,8 +22,8 @@ is not: ``watch`` runs the motion ``w`` for ``n_w`` steps (``planner.watch_s``) 
 MaxEnt IOC likelihood of the joystick input predicted for that user, against each goal's ``k_c``
 (``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
 ``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`), taking ``planner.watch_evidence``
-of that evidence and ``planner.watch_copy_evidence`` of it between copies of one target
-(:func:`~.watched_beliefs.watched_beliefs`; by default half the evidence, and its split between copies as
+(in rotation mode ``planner.watch_evidence_rotation`` where set) of that evidence and
+``planner.watch_copy_evidence`` of it between copies of one target (:func:`~.watched_beliefs.watched_beliefs`; by default half the evidence, and its split between copies as
 the rest: the input people give carries less than a user heading exactly to the goal, session 31). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), one child each; by
@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import FloatArray
-from ..model.actions import Action, ActionKind
+from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import pregrasp_points
 from ..model.model import SharedAutonomyModel
 from ..world.goals import target_object
@@ -296,7 +296,10 @@ class WatchSearch:
         motion by motion (:func:`watched_beliefs`)."""
         ll = R.loglik[0][self.branches][:, ws].transpose(1, 0, 2).reshape(-1, len(self.b0))
         pc = self.cfg.planner
-        return watched_beliefs(self.b0, ll, self.snap.goals.target_index, pc.watch_evidence, pc.watch_copy_evidence)
+        share = pc.watch_evidence
+        if self.snap.mode is Mode.ROTATION and pc.watch_evidence_rotation is not None:
+            share = pc.watch_evidence_rotation
+        return watched_beliefs(self.b0, ll, self.snap.goals.target_index, share, pc.watch_copy_evidence)
 
     def start_children(self, R: Rollouts) -> _Children:
         """The children of every watched motion, their rollouts started on the rollout threads (:meth:`run`
