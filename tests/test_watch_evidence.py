@@ -128,6 +128,21 @@ def _cup_top_or_side(mode: Mode) -> Snapshot:
 
 
 @pytest.mark.parametrize("mode", [Mode.TRANSLATION, Mode.ROTATION])
+def test_the_search_with_a_rotation_share_equals_the_plain_recursion(mode):
+    """``watch_evidence_rotation`` set: the batched search's values equal the plain recursion's, which
+    takes the share by the snapshot's mode (tests/test_watch_model.py)."""
+    model = SharedAutonomyModel(_cfg(watch_evidence_rotation=0.2, max_questions=2))
+    snap = _cup_top_or_side(mode)
+    values, watched, complete = WatchSearch(model, snap).run()
+    ref_values, ref_watched = _reference_values(model, snap)
+    assert complete and watched.keys() == ref_watched.keys() and watched
+    for a, v in ref_values.items():
+        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    for a, v in ref_watched.items():
+        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
+@pytest.mark.parametrize("mode", [Mode.TRANSLATION, Mode.ROTATION])
 def test_the_rotation_share_is_the_share_in_rotation_mode_only(mode):
     """``planner.watch_evidence_rotation``: in rotation mode the watch takes that share of the predicted
     evidence (the same values as ``watch_evidence`` set to it), in translation mode it changes nothing;

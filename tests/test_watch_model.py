@@ -200,10 +200,14 @@ def _outcomes(cfg, goals, question_target: str, b: np.ndarray) -> list[tuple[np.
     return [(P["yes"], yes_b), (P["no"], no_b), (P["other"], other_b)]
 
 
-def _watched_belief(cfg, target_index, b0, ll) -> np.ndarray:
-    """A watched branch's belief, goal by goal: each target's mass by Bayes on ``watch_evidence`` x the
-    log-likelihood, its copies split by ``watch_copy_evidence`` of that."""
-    lam, kappa = cfg.planner.watch_evidence, cfg.planner.watch_copy_evidence
+def _watched_belief(cfg, target_index, b0, ll, mode: Mode = Mode.TRANSLATION) -> np.ndarray:
+    """A watched branch's belief, goal by goal: each target's mass by Bayes on ``watch_evidence`` (in
+    rotation mode ``watch_evidence_rotation`` where set) x the log-likelihood, its copies split by
+    ``watch_copy_evidence`` of that."""
+    pc = cfg.planner
+    lam, kappa = pc.watch_evidence, pc.watch_copy_evidence
+    if mode is Mode.ROTATION and pc.watch_evidence_rotation is not None:
+        lam = pc.watch_evidence_rotation
     full = b0 * np.exp(lam * (ll - ll.max()))
     part = b0 * np.exp(kappa * lam * (ll - ll.max()))
     out = np.zeros_like(b0)
@@ -270,7 +274,7 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         total = 0.0
         for h in over:
             g = h if h in branches else max(branches, key=lambda b: (R.loglik[0, h, w, b], -branches.index(b)))
-            bc = _watched_belief(cfg, snap.goals.target_index, b0, R.loglik[0, g, w])
+            bc = _watched_belief(cfg, snap.goals.target_index, b0, R.loglik[0, g, w], snap.mode)
             kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
             total += b0[h] * (R.watch_return[0, h, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[h])
         watched[s.moves[w]] = total / sum(b0[h] for h in over)
