@@ -92,12 +92,9 @@ def _cfg(**planner):
     return config_from_dict({"planner": {"threads": 1, **planner}}, "test")
 
 
-@pytest.mark.parametrize(("evidence", "kappa"), [(1.0, 0.0), (0.6, 0.5), (0.5, 1.0)])
-def test_the_search_with_copies_equals_the_plain_recursion(evidence, kappa):
-    """The cup held as two copies: the batched search's values equal the plain recursion's, which updates
-    each branch's belief goal by goal (tests/test_watch_model.py)."""
-    model = SharedAutonomyModel(_cfg(watch_evidence=evidence, watch_copy_evidence=kappa, max_questions=2))
-    snap = _split_cup_snapshot()
+def _assert_search_is_the_recursion(model: SharedAutonomyModel, snap: Snapshot) -> None:
+    """The batched search, run to completion, gives every root action the plain recursion's value
+    (``_reference_values``, tests/test_watch_model.py), with at least one motion watched."""
     values, watched, complete = WatchSearch(model, snap).run()
     ref_values, ref_watched = _reference_values(model, snap)
     assert complete and watched.keys() == ref_watched.keys() and watched
@@ -105,6 +102,15 @@ def test_the_search_with_copies_equals_the_plain_recursion(evidence, kappa):
         assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
     for a, v in ref_watched.items():
         assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
+@pytest.mark.parametrize(("evidence", "kappa"), [(1.0, 0.0), (0.6, 0.5), (0.5, 1.0)])
+def test_the_search_with_copies_equals_the_plain_recursion(evidence, kappa):
+    """The cup held as two copies: the batched search's values equal the plain recursion's, which updates
+    each branch's belief goal by goal (tests/test_watch_model.py)."""
+    model = SharedAutonomyModel(_cfg(watch_evidence=evidence, watch_copy_evidence=kappa, max_questions=2))
+    snap = _split_cup_snapshot()
+    _assert_search_is_the_recursion(model, snap)
 
 
 def test_watching_is_worth_less_when_the_copies_are_not_expected_to_part():
@@ -133,13 +139,7 @@ def test_the_search_with_a_rotation_share_equals_the_plain_recursion(mode):
     takes the share by the snapshot's mode (tests/test_watch_model.py)."""
     model = SharedAutonomyModel(_cfg(watch_evidence_rotation=0.2, max_questions=2))
     snap = _cup_top_or_side(mode)
-    values, watched, complete = WatchSearch(model, snap).run()
-    ref_values, ref_watched = _reference_values(model, snap)
-    assert complete and watched.keys() == ref_watched.keys() and watched
-    for a, v in ref_values.items():
-        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
-    for a, v in ref_watched.items():
-        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    _assert_search_is_the_recursion(model, snap)
 
 
 @pytest.mark.parametrize("mode", [Mode.TRANSLATION, Mode.ROTATION])

@@ -23,8 +23,9 @@ MaxEnt IOC likelihood of the joystick input predicted for that user, against eac
 (``planner.watch_likelihood = "kc"``) or, as the tracker reads it, each goal's poses summed with weights
 ``exp(-V)`` (``"marginal"``, :func:`~..model.huber.marginal_nll_driven`), taking ``planner.watch_evidence``
 (in rotation mode ``planner.watch_evidence_rotation`` where set) of that evidence and
-``planner.watch_copy_evidence`` of it between copies of one target (:func:`~.watched_beliefs.watched_beliefs`; by default half the evidence, and its split between copies as
-the rest: the input people give carries less than a user heading exactly to the goal, session 31). If the
+``planner.watch_copy_evidence`` of it between copies of one target (:func:`~.watched_beliefs.watched_beliefs`;
+by default half the evidence, and its split between copies as the rest: the input people give carries less
+than a user heading exactly to the goal, session 31). If the
 tracker would read a user heading to ``g`` as heading elsewhere, the watch is worth what the misled pick
 earns for ``g``. Branches are the top ``G_m`` goals (the ones actions exist for), one child each; by
 ``planner.watch_branches`` a watch's value is averaged over them with ``b`` renormalised (``"top"``), or
