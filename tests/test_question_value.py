@@ -90,3 +90,21 @@ def test_the_script_runs_and_summarises(tmp_path):
     assert "with both runs successful" in done.stdout
     assert "failures without the question" in done.stdout
     assert out.exists() and '"veto_time_s"' in out.read_text()
+
+
+def test_the_summary_splits_by_answer_and_by_a_predicted_standstill():
+    """:func:`summary` over records as ``--json`` writes them: a yes is a question about the task's own
+    target; "predicted still" reads the speed of the mode the question was asked in."""
+    def row(target, mode, speed, saving):
+        return {"task": "cup:top", "target": target, "mode": mode, "user_speed": speed, "margin": 20.0,
+                "success": True, "veto_success": True, "time_s": 10.0, "veto_time_s": 10.0 + saving}
+    rows = [row("cup:top", "rotation", [0.1, 0.0], 3.0),     # yes, still (not turning)
+            row("bowl:top", "rotation", [0.0, 0.05], -1.0),  # no, turning (its linear 0 does not count)
+            row("bowl:top", "translation", [0.001, 0.3], -2.0)]  # no, still (not translating)
+    lines = qv.summary(rows)
+    found = {ln.split(":")[0].strip(): ln for ln in lines if ln.startswith("  ")}
+    assert "1 questions, saving mean   3.00 s" in found["answered yes"]
+    assert "2 questions, saving mean  -1.50 s" in found["answered no"]
+    assert "2 questions, saving mean   0.50 s" in found["predicted still in its mode"]
+    assert "1 questions, saving mean  -1.00 s" in found["predicted moving"]
+    assert lines[-1] == "failures without the question: 0 added, 0 mended"

@@ -11,7 +11,7 @@ that is not a question, by the same plan's root values. Up to ``t_q`` the two ru
 (deterministic per seed); after it they part, and the user's later random draws part with them, so one
 pair is noisy and the mean over many is the measure.
 
-Printed per question and summed: the model's **predicted margin** (the question's root value minus the
+Printed per question and summed (:func:`summary`, which also reads a ``--json`` file's records): the model's **predicted margin** (the question's root value minus the
 best other action's, reward units, at the plan that asked) and the **realised saving** (completion time
 without the question minus with it, s; a trial that fails on either side is counted apart). A question
 the model values well above watching that saves the person no time on average is one the model
@@ -34,6 +34,51 @@ from sa_daemon.model.actions import ActionKind
 from sa_daemon.sim.episode import run_trial
 from sa_daemon.sim.users import builtin_user_names, load_user
 from sa_daemon.world.scene import load_scene
+
+STILL = 0.005
+"""A question counts as asked at a predicted standstill where the user's predicted speed in the mode it was
+asked in is below this (m/s in translation, rad/s in rotation): the watch then expects no evidence."""
+
+
+def summary(rows: list[dict]) -> list[str]:
+    """The summary lines of the per-question records ``rows`` (as written to ``--json``): the saving
+    (vetoed time minus asked time, s) over the questions both runs succeeded on, by the model's margin, by
+    the answer (yes: the asked target is the task's), and by whether the user was predicted still
+    (:data:`STILL`); then the failures the question added or mended."""
+    out = []
+    both = [r for r in rows if r["success"] and r["veto_success"]]
+    if both:
+        saving = np.array([r["veto_time_s"] - r["time_s"] for r in both])
+        margins = np.array([r["margin"] for r in both])
+        se = saving.std(ddof=1) / math.sqrt(len(saving)) if len(saving) > 1 else math.nan
+        out.append(f"{len(rows)} questions; {len(both)} with both runs successful: saving mean {saving.mean():.2f} s "
+                   f"(se {se:.2f}), median {np.median(saving):.2f} s, the question faster in "
+                   f"{int((saving > 0).sum())}, slower in {int((saving < 0).sum())}; predicted margin median "
+                   f"{np.median(margins):.1f}")
+        for lo, hi in ((-math.inf, 10), (10, 30), (30, 100), (100, math.inf)):
+            sel = (margins >= lo) & (margins < hi)
+            if sel.any():
+                out.append(f"  margin [{lo}, {hi}): {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s")
+        yes = np.array([r["target"] == r["task"] for r in both])
+        still = np.array([_predicted_still(r) for r in both])
+        for label, sel in (("answered yes", yes), ("answered no", ~yes),
+                           ("predicted still in its mode", still), ("predicted moving", ~still)):
+            if sel.any():
+                out.append(f"  {label}: {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s, "
+                           f"margin median {np.median(margins[sel]):.1f}")
+    lost = sum(r["success"] and not r["veto_success"] for r in rows)
+    gained = sum(r["veto_success"] and not r["success"] for r in rows)
+    out.append(f"failures without the question: {lost} added, {gained} mended")
+    return out
+
+
+def _predicted_still(row: dict) -> bool:
+    """The user's predicted speed in the mode the question was asked in is below :data:`STILL` (``False``
+    where the plan was not found: no mode recorded)."""
+    if not row["mode"]:
+        return False
+    linear, angular = row["user_speed"]
+    return (angular if row["mode"] == "rotation" else linear) < STILL
 
 
 def margin(result) -> float:
@@ -110,26 +155,7 @@ def main() -> None:
                           f"margin {m:7.1f}  asked {trial.completion_time_s:5.1f} s ({trial.questions} q, "
                           f"{'ok' if trial.success else 'FAIL'})  vetoed {alt.completion_time_s:5.1f} s "
                           f"({alt.questions} q, {'ok' if alt.success else 'FAIL'})", flush=True)
-    both = [r for r in rows if r["success"] and r["veto_success"]]
-    if both:
-        saving = np.array([r["veto_time_s"] - r["time_s"] for r in both])
-        margins = np.array([r["margin"] for r in both])
-        se = saving.std(ddof=1) / math.sqrt(len(saving)) if len(saving) > 1 else math.nan
-        print(f"\n{len(rows)} questions; {len(both)} with both runs successful: saving mean {saving.mean():.2f} s "
-              f"(se {se:.2f}), median {np.median(saving):.2f} s, the question faster in {int((saving > 0).sum())}, "
-              f"slower in {int((saving < 0).sum())}; predicted margin median {np.median(margins):.1f}")
-        for lo, hi in ((-math.inf, 10), (10, 30), (30, 100), (100, math.inf)):
-            sel = (margins >= lo) & (margins < hi)
-            if sel.any():
-                print(f"  margin [{lo}, {hi}): {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s")
-        still = np.array([r["mode"] == "rotation" and r["user_speed"][1] < 1e-3 for r in both])
-        for label, sel in (("in rotation, predicted not to turn", still), ("otherwise", ~still)):
-            if sel.any():
-                print(f"  {label}: {int(sel.sum()):4} questions, saving mean {saving[sel].mean():6.2f} s, "
-                      f"margin median {np.median(margins[sel]):.1f}")
-    lost = sum(r["success"] and not r["veto_success"] for r in rows)
-    gained = sum(r["veto_success"] and not r["success"] for r in rows)
-    print(f"failures without the question: {lost} added, {gained} mended")
+    print("\n" + "\n".join(summary(rows)))
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"scene": args.scene, "tasks": args.task, "window_s": window, "config": args.config,
