@@ -227,8 +227,9 @@ class SafetyPipeline:
         code = SafetyCode.SPEED
         p, v = np.asarray(pose.position, dtype=float), t[:3]
         room = np.where(v > 0, self._hi - p, self._lo - p) / self.dt  # the speed per axis that reaches a face
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratios = np.where(np.abs(v) > np.abs(room), np.maximum(room / v, 0.0), 1.0)
+        # divide only where the axis would pass a face (|v| > |room|): there |room / v| < 1, no overflow
+        reach = np.abs(v) > np.abs(room)
+        ratios = np.maximum(np.divide(room, v, out=np.ones_like(v), where=reach), 0.0)
         if float(np.min(ratios)) < scale:
             scale, code = float(np.min(ratios)), SafetyCode.WORKSPACE
         if scale >= 1.0:
