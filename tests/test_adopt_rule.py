@@ -4,6 +4,7 @@ synthetic suites."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -33,6 +34,7 @@ def _suite(cells: dict[tuple[str, str, str, str], tuple[int, float, float]], n: 
             trials.append({"scene": scene, "task": task, "method": method, "user": user, "seed": seed,
                            "success": seed < ok, "completion_time_s": time_s if seed < ok else 100.0,
                            "correct_prediction": seed < round(pred * n), "questions": 0,
+                           "final_target_p": 0.9 if seed < round(pred * n) else 0.5,
                            "mode_changes": 1, "joystick_input": 50.0, "opposing_pct": 0.0})
         summary.append({"scene": scene, "task": task, "method": method, "user": user,
                         "completion_time_s": time_s if ok else None})
@@ -151,3 +153,28 @@ def test_s32_counts_cells_on_the_seeds_both_succeed(adopt):
     lost = next(t for t in a["trials"] if t["method"] == "policy" and t["success"] and t is not mended)
     lost.update(success=False, completion_time_s=100.0)  # a new failure drops out of the pairs
     assert adopt.paired_cell_changes(a, b)["policy"] == [0, 0]
+
+
+def test_s37_weighs_issue_16s_targets_and_a_lost_prediction_is_not_a_veto(adopt, tmp_path, capsys):
+    """Session 37's form: (t) in place of (a''). The option first loses `cup:side`'s prediction below 0.9 and
+    gains the drill's: one target row for another, not more met, off. Then it keeps `cup:side` at 0.9: one
+    more row met, adopted, though (a'') would have weighed the lost predictions on their own."""
+    old = {("scene2", "drill:side_vertical", "policy", "u1"): (10, 20.0, 0.5),
+           ("scene1", "cup:side", "policy", "u1"): (10, 10.0, 1.0)}
+    new = {("scene2", "drill:side_vertical", "policy", "u1"): (10, 20.0, 1.0),
+           ("scene1", "cup:side", "policy", "u1"): (10, 10.0, 0.8)}
+    for tag, cells in (("old", old), ("new", new)):
+        (tmp_path / f"suite-fig7-{tag}.json").write_text(json.dumps(_suite(cells)))
+    files = {t: [tmp_path / f"suite-fig7-{t}.json"] for t in ("old", "new")}
+    met_old, met_new = (adopt.targets_met(files[t]) for t in ("old", "new"))
+    assert met_old[("correct prediction >= 0.9", "scene2 `drill:side_vertical`")] is False
+    assert met_new[("correct prediction >= 0.9", "scene1 `cup:side`")] is False
+    assert adopt.judge_targets(met_new, met_old) != []  # one row gained, one lost: not more
+    better = {**new, ("scene1", "cup:side", "policy", "u1"): (10, 10.0, 0.9)}
+    (tmp_path / "suite-fig7-new.json").write_text(json.dumps(_suite(better)))
+    assert adopt.main(["new", "--dir", str(tmp_path), "--default", "old", "--default-dir", str(tmp_path),
+                       "--rule", "s37"]) == 0
+    out = capsys.readouterr().out
+    assert "Rule s37: adopt" in out
+    assert "correct prediction >= 0.9 (scene2 `drill:side_vertical`): False -> True" in out
+    assert adopt.judge_targets(met_old, met_old) == ["(t) issue 16's targets met 2 -> 2"]  # prediction, success

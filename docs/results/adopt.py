@@ -40,6 +40,14 @@ time-out (a new, slow success) counted as slower and a new failure could count a
       configurations succeed on (same user and seed) rises by more than 5 % are no more than those whose
       paired mean time falls by more than 5 %.
 
+``--rule s37`` is s32 with (a'') replaced, written in session 37 for candidates whose gain is issue 16's
+targets (``docs/results.md``, "Session 37"); the manual runs on the same seeds (``--manual TAG``) join
+both sides' files:
+
+(t) ``targets.py`` on the option's files (the 22-goal suite's included) meets more of issue 16's target
+    rows than on the default's: a correct prediction lost below 0.9 on a task is a row lost, weighed with
+    the rest, not a veto.
+
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
 """
@@ -53,6 +61,7 @@ import sys
 from pathlib import Path
 
 from report import verdicts
+from targets import load_trials, report
 
 from sa_daemon.sim.evaluate import summarise, trial_key
 
@@ -235,6 +244,18 @@ def judge(rows: list[dict], cells: dict[str, list[int]],
     return fails
 
 
+def targets_met(paths: list[Path]) -> dict[tuple[str, str], bool | None]:
+    """Rule s37's (t): each of issue 16's target rows (``targets.py``) on the trials of ``paths``, its verdict
+    by (target, where)."""
+    return {(r.target, r.where): r.met for r in report(load_trials(paths))}
+
+
+def judge_targets(new: dict[tuple[str, str], bool | None], old: dict[tuple[str, str], bool | None]) -> list[str]:
+    """(t): a failure line unless the option meets more target rows than the default."""
+    n_new, n_old = (sum(v is True for v in d.values()) for d in (new, old))
+    return [] if n_new > n_old else [f"(t) issue 16's targets met {n_old} -> {n_new}"]
+
+
 def _f(x: float | None, digits: int) -> str:
     return "-" if x is None else f"{x:.{digits}f}"
 
@@ -245,8 +266,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
     ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
-    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29", "s32"), default="s19",
-                    help="s19: session 19's rule; s28, s28b, s29, s32: for options that leave the tracker")
+    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29", "s32", "s37"), default="s19",
+                    help="s19: session 19's rule; s28, s28b, s29, s32: for options that leave the tracker; "
+                    "s37: for options whose gain is issue 16's targets")
+    ap.add_argument("--manual", help="rule s37: the tag of the manual runs on the same seeds (in --dir)")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
     judged_logp: dict[tuple[str, str], tuple[float, float, float]] = {}
@@ -264,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{suite}: no {old_path.name} to compare with; skipped", file=sys.stderr)
             continue
         old = json.loads(old_path.read_text())
-        cells = paired_cell_changes(new, old) if args.rule == "s32" else cell_changes(new, old)
+        cells = paired_cell_changes(new, old) if args.rule in ("s32", "s37") else cell_changes(new, old)
         rows, logp = task_rows(new, old), logp_changes(new, old)
         flips, successes = prediction_flips(new, old), success_flips(new, old)
         for (scene, task, method), (lost, gained, p) in successes.items():
@@ -296,9 +319,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no suite-*-{args.tag}.json of {', '.join(RULE_SUITES)} in {args.dir}", file=sys.stderr)
         return 2
     print("\n" + "\n".join(lines) + "\n")
-    fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None,
-                  judged_flips if args.rule in ("s28b", "s29", "s32") else None,
-                  judged_successes if args.rule in ("s29", "s32") else None)
+    flips = {} if args.rule == "s37" else judged_flips if args.rule in ("s28b", "s29", "s32") else None
+    fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None, flips,
+                  judged_successes if args.rule in ("s29", "s32", "s37") else None)
+    if args.rule == "s37":
+        manual = [args.dir / f"suite-{s}-{args.manual}.json" for s in ("table1", "study-simple")] if args.manual else []
+        sides = [[d / f"suite-{s}-{t}.json" for s in ALL_SUITES if (d / f"suite-{s}-{t}.json").exists()] + manual
+                 for d, t in ((args.dir, args.tag), (args.default_dir, args.default))]
+        new_t, old_t = (targets_met(paths) for paths in sides)
+        for key in sorted(new_t.keys() | old_t.keys()):
+            if new_t.get(key) is not old_t.get(key):
+                print(f"target {key[0]} ({key[1]}): {old_t.get(key)} -> {new_t.get(key)}")
+        fails += judge_targets(new_t, old_t)
     print(f"Rule {args.rule}: " + ("adopt" if not fails else "off"))
     for f in fails:
         print("  " + f)

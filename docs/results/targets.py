@@ -1,0 +1,198 @@
+"""Issue 16's targets, each checked on recorded suite files: what it asks, what the files measure, met or not.
+
+    python docs/results/targets.py FILE [FILE ...]
+
+``FILE`` are ``sa-daemon eval --json`` files (suites or plain runs). Their trials are pooled, a trial being
+one (scene, task, user, method, seed); a trial recorded in two files (Table I's ``cup:top`` is also Fig. 7's
+first task) is taken once, from the first file, and two records of it that disagree are an error, since
+then the files come from different models. Paired tests are recomputed on the pooled trials with the
+evaluation's own :func:`~sa_daemon.sim.evaluate.compare` (Wilcoxon by seed, Holm over every test of a
+(scene, task, user)), so a manual run on the same seeds joins the HO comparison's correction. A target
+whose trials are not in the files is reported as not measured, not as met. Prints a Markdown table.
+
+The targets (issue 16, "Targets"; the policy's trials unless named):
+
+* questions a task 0.4-1.6 on Scene 1 ``cup:top``, ``cup:side``, ``bowl:top`` and the simple study's tasks;
+  at most 0.2 on ``chips can:side``; at most 1.0 on average on the 22-goal scene, no trial above 3;
+* no question while the belief is within 10 % of uniform; the asked target's object among the two most
+  likely in at least 0.8 of the questions (task by task);
+* in the first 2 s of the Scene 1 tasks, HO or no-assist in most plans;
+* the policy faster than HO, and with less joystick input, for every user on Table I and the simple
+  study (Holm p < 0.05), never significantly slower than manual; ``cup:side`` succeeding in at least 4 of
+  5 trials for every user; correct prediction at least 0.9 on every task.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from sa_daemon.sim.evaluate import compare, question_measures
+
+POLICY = "policy"
+ALPHA = 0.05
+SCENE1_ASKING = (("scene1", "cup:top"), ("scene1", "cup:side"), ("scene1", "bowl:top"))
+EASY = ("scene1", "chips can:side")
+Key = tuple[str, str]
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the report: the target, where it is measured, the figure, and the verdict (``None``:
+    not measured in the files)."""
+
+    target: str
+    where: str
+    measured: str
+    met: bool | None
+
+
+def load_trials(paths: Iterable[Path]) -> list[dict]:
+    """The trials of every file, each (scene, task, user, method, seed) once (module doc)."""
+    seen: dict[tuple, dict] = {}
+    for path in paths:
+        for t in json.loads(Path(path).read_text())["trials"]:
+            key = (t["scene"], t["task"], t["user"], t["method"], t["seed"])
+            old = seen.setdefault(key, t)
+            if old is not t and (old["completion_time_s"], old["questions"]) != (t["completion_time_s"], t["questions"]):
+                raise ValueError(f"{key} recorded twice with different outcomes ({path}): not one model's files")
+    return list(seen.values())
+
+
+def _tasks(trials: list[dict], scene: str | None = None, method: str = POLICY) -> list[Key]:
+    return list(dict.fromkeys((t["scene"], t["task"]) for t in trials
+                              if t["method"] == method and (scene is None or t["scene"] == scene)))
+
+
+def _of(trials: list[dict], key: Key, method: str = POLICY) -> list[dict]:
+    return [t for t in trials if (t["scene"], t["task"]) == key and t["method"] == method]
+
+
+def _mean(values: list[float]) -> float:
+    return sum(values) / len(values)
+
+
+def _where(key: Key) -> str:
+    return f"{key[0]} `{key[1]}`"
+
+
+def question_band(trials: list[dict]) -> list[Row]:
+    """Questions a task in 0.4-1.6 where the paper's asked, at most 0.2 on the easy task."""
+    simple = _tasks(trials, "study-simple")
+    rows = []
+    for key in [*SCENE1_ASKING, *simple]:
+        ts = _of(trials, key)
+        q = _mean([t["questions"] for t in ts]) if ts else None
+        rows.append(Row("questions a task 0.4-1.6", _where(key), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
+                        None if q is None else 0.4 <= q <= 1.6))
+    ts = _of(trials, EASY)
+    q = _mean([t["questions"] for t in ts]) if ts else None
+    rows.append(Row("questions a task <= 0.2", _where(EASY), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
+                    None if q is None else q <= 0.2))
+    return rows
+
+
+def many_goals(trials: list[dict]) -> list[Row]:
+    """The 22-goal scene: at most 1.0 questions a task on average, no trial above 3."""
+    ts = [t for t in trials if t["scene"] == "study-complex" and t["method"] == POLICY]
+    if not ts:
+        return [Row("22 goals: questions <= 1.0 a task, no trial above 3", "study-complex", "-", None)]
+    q = _mean([t["questions"] for t in ts])
+    over = sum(t["questions"] > 3 for t in ts)
+    return [Row("22 goals: questions <= 1.0 a task, no trial above 3", "study-complex",
+                f"{q:.2f} a task; {over} of {len(ts)} trials above 3", q <= 1.0 and over == 0)]
+
+
+def what_is_asked(trials: list[dict]) -> list[Row]:
+    """No question near a uniform belief; the asked object among the two likeliest, task by task."""
+    ts = [t for t in trials if t["method"] == POLICY and "asked" in t]
+    asked = [q for t in ts for q in t["asked"]]
+    near = sum(q["over_uniform"] < 1.1 for q in asked)
+    rows = [Row("no question within 10 % of uniform", "every task", f"{near} of {len(asked)} questions",
+                None if not ts else near == 0)]
+    for key in _tasks(ts):
+        share = question_measures(_of(ts, key))["questions_top2"]
+        if share is not None:
+            rows.append(Row("asked object among the two likeliest >= 0.8", _where(key), f"{share:.2f}", share >= 0.8))
+    return rows
+
+
+def early_plans(trials: list[dict]) -> list[Row]:
+    """In the first 2 s of the Scene 1 tasks, HO or no-assist in most plans."""
+    rows = []
+    for key in _tasks(trials, "scene1"):
+        share = question_measures(_of(trials, key))["early_passive"]
+        rows.append(Row("first 2 s: HO or no-assist in most plans", _where(key),
+                        "-" if share is None else f"{share:.2f}", None if share is None else share > 0.5))
+    return rows
+
+
+def against(trials: list[dict], comparisons: list[dict], baseline: str) -> list[Row]:
+    """Per Table I and simple-study task: the users for whom the policy is significantly faster (and uses
+    less input) than ``baseline``, and those for whom it is significantly slower (more input)."""
+    rows = []
+    for key in [k for k in _tasks(trials) if k == ("scene1", "cup:top") or k[0] == "study-simple"]:
+        users = sorted({t["user"] for t in _of(trials, key)})
+        tests = {(c["user"], c["metric"]): c for c in comparisons
+                 if (c["scene"], c["task"]) == key and c["baseline"] == baseline and c["p_holm"] is not None}
+        if not tests:
+            rows.append(Row(f"policy against {baseline}", _where(key), f"no {baseline} trials", None))
+            continue
+        figures, ok = [], True
+        for metric, name in (("completion_time_s", "time"), ("joystick_input", "input")):
+            sig = [tests[(u, metric)] for u in users if (u, metric) in tests and tests[(u, metric)]["p_holm"] < ALPHA]
+            better = sum(c["median_diff"] < 0 for c in sig)
+            worse = sum(c["median_diff"] > 0 for c in sig)
+            figures.append(f"{name}: better for {better}, worse for {worse} of {len(users)}")
+            ok = ok and (worse == 0 if baseline == "manual" else better == len(users))
+        target = ("policy never significantly slower than manual" if baseline == "manual"
+                  else "policy faster and less input than HO for every user")
+        rows.append(Row(target, _where(key), "; ".join(figures), ok))
+    return rows
+
+
+def cup_side_success(trials: list[dict]) -> list[Row]:
+    """``cup:side`` succeeds in at least 4 of 5 trials for every user."""
+    ts = _of(trials, ("scene1", "cup:side"))
+    if not ts:
+        return [Row("`cup:side` succeeds >= 0.8 for every user", "scene1 `cup:side`", "-", None)]
+    rates = {u: _mean([t["success"] for t in ts if t["user"] == u]) for u in sorted({t["user"] for t in ts})}
+    low = {u: r for u, r in rates.items() if r < 0.8}
+    return [Row("`cup:side` succeeds >= 0.8 for every user", "scene1 `cup:side`",
+                f"lowest {min(rates.values()):.2f}" + (f" ({', '.join(low)})" if low else ""), not low)]
+
+
+def prediction(trials: list[dict]) -> list[Row]:
+    """Correct prediction (the true target above 0.7 at the end) at least 0.9, task by task."""
+    rows = []
+    for key in _tasks(trials):
+        rate = _mean([t["correct_prediction"] for t in _of(trials, key)])
+        rows.append(Row("correct prediction >= 0.9", _where(key), f"{rate:.2f}", rate >= 0.9))
+    return rows
+
+
+def report(trials: list[dict]) -> list[Row]:
+    """Every target's rows, in the issue's order."""
+    comparisons = compare(trials, POLICY)
+    checks: list[Callable[[list[dict]], list[Row]]] = [question_band, many_goals, what_is_asked, early_plans]
+    rows = [r for check in checks for r in check(trials)]
+    rows += against(trials, comparisons, "ho") + against(trials, comparisons, "manual")
+    return rows + cup_side_success(trials) + prediction(trials)
+
+
+def markdown(rows: list[Row]) -> str:
+    verdict = {True: "met", False: "**not met**", None: "not measured"}
+    lines = ["| target | where | measured | verdict |", "|---|---|---|---|"]
+    lines += [f"| {r.target} | {r.where} | {r.measured} | {verdict[r.met]} |" for r in rows]
+    met = sum(r.met is True for r in rows)
+    unmet = sum(r.met is False for r in rows)
+    return "\n".join(lines) + f"\n\n{met} met, {unmet} not met, {len(rows) - met - unmet} not measured."
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    print(markdown(report(load_trials(Path(p) for p in sys.argv[1:]))))
