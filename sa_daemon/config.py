@@ -102,10 +102,11 @@ class IntentConfig(_Section):
         "one k_c)",
     )
     copy_weights: Literal["equal", "poses", "input"] = Field(
-        "equal",
+        "poses",
         description="a target's probability over the copies resampling makes of it (section III-G): equal = "
-        "the same share each; poses = each copy's share of the target's grasp-pose weights exp(-V) at the "
-        "gripper, so the next input's likelihood is the same before and after; input = each copy's share of "
+        "the same share each (the paper's Fig. 2); poses = each copy's share of the target's grasp-pose weights "
+        "exp(-V) at the gripper, so the next input's likelihood is the same before and after (the default since "
+        "session 37, docs/results.md); input = each copy's share of "
         "the target's posterior over its grasp poses from the input since the last resampling, so a split "
         "keeps what the input said about the pose (docs/model.md)",
     )
@@ -308,11 +309,11 @@ class PlannerConfig(_Section):
         "predicted to stay still) or hold (left as it was: the speed the user moves at when it moves)",
     )
     user_speed_unused: Literal["zero", "deflection"] = Field(
-        "zero",
+        "deflection",
         description="the predicted speed in a mode the user has not been in yet in this task: zero (the user is "
         "predicted not to move in it: at the first switch to rotation a watch expects no evidence) or deflection "
         "(the stick held as far as in the other mode: v_other / scale_other x scale_this, input.*_scale_*; "
-        "session 35, docs/model.md)",
+        "session 35, docs/model.md; the default since session 37)",
     )
 
 

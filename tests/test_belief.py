@@ -20,7 +20,7 @@ from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
 GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
-INTENT = IntentConfig(step_cost="time", rationality=1.0)  # Javdani's published form
+INTENT = IntentConfig(step_cost="time", rationality=1.0, copy_weights="equal")  # Javdani's form, the paper's Fig. 2 copies
 PATH = IntentConfig(step_cost="path", rationality=1.0)
 MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})
 NEAREST = MARGINAL.model_copy(update={"poses": "nearest"})

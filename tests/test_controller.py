@@ -713,8 +713,9 @@ def test_closed_loop_policy_reaches_cup_top_within_limits():
 def test_the_predicted_user_speed_over_a_pause_decays_or_holds(idle):
     """``planner.user_speed_idle``: 2 s of full deflection, then 2 s of a released stick (zero input, still
     fresh). ``decay`` averages the zeros in (time constant ``user_speed_tau_s`` = 1 s: e^-2 of the speed
-    left); ``hold`` keeps the speed the user moved at. The other mode's speed is untouched either way."""
-    cfg = config_from_dict({"planner": {"user_speed_idle": idle}})
+    left); ``hold`` keeps the speed the user moved at. The other mode's speed is untouched either way (a mode
+    not yet entered predicted still, ``user_speed_unused = "zero"``; the deflection: ``test_user_speed.py``)."""
+    cfg = config_from_dict({"planner": {"user_speed_idle": idle, "user_speed_unused": "zero"}})
     ctl = make_ctl(cfg=cfg)
     t = 0.0
     for _ in range(80):

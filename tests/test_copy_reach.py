@@ -46,8 +46,9 @@ def scene() -> GoalSet:
 
 
 def split() -> Belief:
-    """``a:top`` at 0.8, resampled into copies that own disjoint subsets of its poses."""
-    cfg = IntentConfig(step_cost="time", rationality=1.0)
+    """``a:top`` at 0.8, resampled into copies that own disjoint subsets of its poses, at equal shares (so
+    a few per cent more makes any copy the likeliest)."""
+    cfg = IntentConfig(step_cost="time", rationality=1.0, copy_weights="equal")
     b = Belief.from_probs(scene(), np.array([0.8, 0.1, 0.05, 0.05])).resampled(GRIPPER, cfg)
     assert [g.target for g in b.goals.goals].count("a:top") >= 2, "the fixture must split a:top"
     return b

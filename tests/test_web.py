@@ -337,7 +337,7 @@ def test_in_chromium_the_belief_bars_follow_the_user_as_they_drive(browser, tmp_
     """A fresh daemon with HO assistance (no questions): the user drives to the cup from the start."""
     with fresh_page(tmp_path) as (_, w):
         browser.get(w.url + "/")
-        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
+        until(lambda: browser.execute_script("return window.saRendered || 0") > 3, what="states drawn")
         early = dict(browser.execute_script(BARS))
         assert set(early) == {"cup:top", "cup:side", "chips can:side", "bowl:top"}
         late = until(lambda: (b := dict(browser.execute_script(BARS)))["cup:top"] + b["cup:side"]
@@ -354,7 +354,7 @@ def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_
     c = d.collector
     assert d.request({"cmd": "resume"})["ok"]
     browser.get(w.url + "/")
-    until(lambda: browser.execute_script("return window.saRendered") > 10, what="states drawn")
+    until(lambda: browser.execute_script("return window.saRendered || 0") > 10, what="states drawn")
 
     # The daemon asks (its simulated user waits 60 s to answer); the person taps Yes on the page. The
     # question must be one asked from now on: one left pending by an earlier test may time out
@@ -398,7 +398,7 @@ def test_in_chromium_the_keyboard_works_too(live, browser):
     d, w = live
     c = d.collector
     browser.get(w.url + "/")
-    until(lambda: browser.execute_script("return window.saRendered") > 3, what="states drawn")
+    until(lambda: browser.execute_script("return window.saRendered || 0") > 3, what="states drawn")
     i = len(c)
     browser.find_element(By.TAG_NAME, "body").send_keys("s")
     c.event("stop", timeout_s=10, start=i, source="command")
@@ -418,9 +418,9 @@ def test_in_chromium_a_bad_token_gets_nothing_and_the_right_one_the_live_page(li
         assert browser.title != "sa-daemon" and "STOP" not in browser.page_source  # an empty 401
         browser.get(w.url + "/?token=" + token)
         assert browser.title == "sa-daemon"
-        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states over the WebSocket")
+        until(lambda: browser.execute_script("return window.saRendered || 0") > 3, what="states over the WebSocket")
         browser.get(w.url + "/")  # the cookie alone, from now on
-        until(lambda: browser.execute_script("return window.saRendered") > 3, what="states with the cookie")
+        until(lambda: browser.execute_script("return window.saRendered || 0") > 3, what="states with the cookie")
     finally:
         w.close()
 

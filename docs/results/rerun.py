@@ -30,8 +30,10 @@ KEYS = ("success_rate", "completion_time_s", "mode_changes", "joystick_input", "
 
 
 BEFORE_THE_KEY = {
-    "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0, "rank_goals": "goal"},
-    "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0},
+    "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0, "rank_goals": "goal",
+                "user_speed_unused": "zero"},
+    "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0,
+               "copy_weights": "equal"},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
@@ -48,7 +50,9 @@ held every "no" final; one without ``planner.watch_evidence`` (session 31) credi
 of the predicted input's evidence; one without ``asking.withdraw_yes_s`` held every "yes" final (the key
 existed since session 27, off; files recorded before it lack it, and it became 2 s in session 33); one
 without ``planner.rank_goals`` (session 32) ranked the top goals by their own probability (``"goal"``;
-``"cover"`` since session 33). The ``-turn-charge`` files (session 22) measured
+``"cover"`` since session 33); one without ``intent.copy_weights`` (session 19) gave a target's copies
+equal shares, and one without ``planner.user_speed_unused`` (session 35) predicted a mode not yet entered
+still (``"poses"`` and ``"deflection"`` since session 37). The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 
