@@ -319,6 +319,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no suite-*-{args.tag}.json of {', '.join(RULE_SUITES)} in {args.dir}", file=sys.stderr)
         return 2
     print("\n" + "\n".join(lines) + "\n")
+    # s37 has no prediction part of its own ((t) weighs the predictions): no flips, and not None, which is (a)
     flips = {} if args.rule == "s37" else judged_flips if args.rule in ("s28b", "s29", "s32") else None
     fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None, flips,
                   judged_successes if args.rule in ("s29", "s32", "s37") else None)
