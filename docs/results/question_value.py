@@ -11,11 +11,11 @@ that is not a question, by the same plan's root values. Up to ``t_q`` the two ru
 (deterministic per seed); after it they part, and the user's later random draws part with them, so one
 pair is noisy and the mean over many is the measure.
 
-Printed per question and summed (:func:`summary`, which also reads a ``--json`` file's records): the model's **predicted margin** (the question's root value minus the
-best other action's, reward units, at the plan that asked) and the **realised saving** (completion time
-without the question minus with it, s; a trial that fails on either side is counted apart). A question
-the model values well above watching that saves the person no time on average is one the model
-overvalues. A measuring script, not an interface: it reads the plan's root values and swaps the
+Printed per question and summed (:func:`summary`, which also reads a ``--json`` file's records): the
+model's **predicted margin** (the question's root value minus the best other action's, reward units, at
+the plan that asked) and the **realised saving** (completion time without the question minus with it, s;
+a trial that fails on either side is counted apart). A question the model values well above watching
+that saves the person no time on average is one the model overvalues. A measuring script, not an interface: it reads the plan's root values and swaps the
 controller's input at one point (``Controller.accept_plan``).
 """
 

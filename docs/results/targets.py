@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from sa_daemon.sim.evaluate import compare, question_measures
+from sa_daemon.sim.evaluate import compare, question_measures, trial_key
 
 POLICY = "policy"
 ALPHA = 0.05
@@ -55,7 +55,7 @@ def load_trials(paths: Iterable[Path]) -> list[dict]:
     seen: dict[tuple, dict] = {}
     for path in paths:
         for t in json.loads(Path(path).read_text())["trials"]:
-            key = (t["scene"], t["task"], t["user"], t["method"], t["seed"])
+            key = trial_key(t)
             old = seen.setdefault(key, t)
             if old is not t and (old["completion_time_s"], old["questions"]) != (t["completion_time_s"], t["questions"]):
                 raise ValueError(f"{key} recorded twice with different outcomes ({path}): not one model's files")
@@ -79,20 +79,19 @@ def _where(key: Key) -> str:
     return f"{key[0]} `{key[1]}`"
 
 
+def _questions(trials: list[dict], key: Key, target: str, within: Callable[[float], bool]) -> Row:
+    """The policy's questions a task on ``key``, judged by ``within``."""
+    ts = _of(trials, key)
+    q = _mean([t["questions"] for t in ts]) if ts else None
+    return Row(target, _where(key), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
+               None if q is None else within(q))
+
+
 def question_band(trials: list[dict]) -> list[Row]:
     """Questions a task in 0.4-1.6 where the paper's asked, at most 0.2 on the easy task."""
-    simple = _tasks(trials, "study-simple")
-    rows = []
-    for key in [*SCENE1_ASKING, *simple]:
-        ts = _of(trials, key)
-        q = _mean([t["questions"] for t in ts]) if ts else None
-        rows.append(Row("questions a task 0.4-1.6", _where(key), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
-                        None if q is None else 0.4 <= q <= 1.6))
-    ts = _of(trials, EASY)
-    q = _mean([t["questions"] for t in ts]) if ts else None
-    rows.append(Row("questions a task <= 0.2", _where(EASY), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
-                    None if q is None else q <= 0.2))
-    return rows
+    rows = [_questions(trials, key, "questions a task 0.4-1.6", lambda q: 0.4 <= q <= 1.6)
+            for key in [*SCENE1_ASKING, *_tasks(trials, "study-simple")]]
+    return rows + [_questions(trials, EASY, "questions a task <= 0.2", lambda q: q <= 0.2)]
 
 
 def many_goals(trials: list[dict]) -> list[Row]:

@@ -301,7 +301,7 @@ class Belief:
                 if posterior is not None:
                     inner.append(share[own] / max(share[own].sum(), 1e-300))
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        # pose weights uniform again, as the copies are (under "input" each copy keeps its poses' posterior)
+        # each copy's weights over its own poses start uniform (under "input" it keeps their posterior)
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
                       pose_log_w=None if posterior is None else _padded_log(inner, out.goals.pose_mask),
                       anchor=self.anchor)
