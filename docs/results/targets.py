@@ -17,9 +17,17 @@ The targets (issue 16, "Targets"; the policy's trials unless named):
 * no question while the belief is within 10 % of uniform; the asked target's object among the two most
   likely in at least 0.8 of the questions (task by task);
 * in the first 2 s of the Scene 1 tasks, HO or no-assist in most plans;
-* the policy faster than HO, and with less joystick input, for every user on Table I and the simple
-  study (Holm p < 0.05), never significantly slower than manual; ``cup:side`` succeeding in at least 4 of
-  5 trials for every user; correct prediction at least 0.9 on every task.
+* the policy beating HO on completion time and joystick input for every user on Table I and the simple
+  study, "Holm-corrected p < 0.05 where the paper found it" (below); never significantly slower than
+  manual; ``cup:side`` succeeding in at least 4 of 5 trials for every user; correct prediction at least 0.9
+  on every task.
+
+"Where the paper found it": the paper's simple study found the policy significantly better than HO on the
+cup (its Task 3: time p = 0.019, joystick input p = 0.003, section VI-D.1) and nowhere else; Table I is one
+trial a method, without a test. So on the simple cup every user must be significantly better (Holm p < 0.05)
+on both measures; on the other tasks "beats" is read as every user's paired median difference favouring the
+policy with no user significantly worse. Sessions before 38 asked significance everywhere; the row still
+prints how many users are significantly better, so that stricter reading can be read off it.
 """
 
 from __future__ import annotations
@@ -34,6 +42,8 @@ from sa_daemon.sim.evaluate import compare, question_measures, trial_key
 
 POLICY = "policy"
 ALPHA = 0.05
+# The (scene, task)s and measures on which the paper found the policy significantly better than HO (above).
+PAPER_SIGNIFICANT = {("study-simple", "cup:top"): ("completion_time_s", "joystick_input")}
 SCENE1_ASKING = (("scene1", "cup:top"), ("scene1", "cup:side"), ("scene1", "bowl:top"))
 EASY = ("scene1", "chips can:side")
 Key = tuple[str, str]
@@ -131,7 +141,9 @@ def early_plans(trials: list[dict]) -> list[Row]:
 
 def against(trials: list[dict], comparisons: list[dict], baseline: str) -> list[Row]:
     """Per Table I and simple-study task: the users for whom the policy is significantly faster (and uses
-    less input) than ``baseline``, and those for whom it is significantly slower (more input)."""
+    less input) than ``baseline``, and those for whom it is significantly slower (more input). Against
+    manual the target is no user significantly worse; against HO, every user's paired median better, none
+    significantly worse, and every user significantly better where the paper found it (module doc)."""
     rows = []
     for key in [k for k in _tasks(trials) if k == ("scene1", "cup:top") or k[0] == "study-simple"]:
         users = sorted({t["user"] for t in _of(trials, key)})
@@ -146,9 +158,15 @@ def against(trials: list[dict], comparisons: list[dict], baseline: str) -> list[
             better = sum(c["median_diff"] < 0 for c in sig)
             worse = sum(c["median_diff"] > 0 for c in sig)
             figures.append(f"{name}: better for {better}, worse for {worse} of {len(users)}")
-            ok = ok and (worse == 0 if baseline == "manual" else better == len(users))
+            if baseline == "manual":
+                ok = ok and worse == 0
+                continue
+            leaning = sum((u, metric) in tests and tests[(u, metric)]["median_diff"] < 0 for u in users)
+            figures[-1] += f" (median better for {leaning})"
+            asked = better if metric in PAPER_SIGNIFICANT.get(key, ()) else leaning
+            ok = ok and worse == 0 and asked == len(users)
         target = ("policy never significantly slower than manual" if baseline == "manual"
-                  else "policy faster and less input than HO for every user")
+                  else "policy beats HO on time and input for every user (significantly on the simple cup)")
         rows.append(Row(target, _where(key), "; ".join(figures), ok))
     return rows
 
