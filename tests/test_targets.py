@@ -94,6 +94,16 @@ def test_significance_against_ho_is_asked_only_where_the_paper_found_it(scene, m
     assert row.met is met
 
 
+def test_questions_by_user_shows_which_users_make_a_task_mean():
+    trials = [trial(task="cup:side", user=u, seed=s, questions=q)
+              for u, qs in (("calm", (0, 0)), ("paused", (1, 2))) for s, q in enumerate(qs)]
+    trials.append(trial(task="cup:side", user="calm", method="ho", seed=0, questions=5))  # not the policy's
+    table = targets.questions_by_user(trials).splitlines()
+    assert table[0] == "| questions a task | calm | paused | all |"
+    assert table[2] == "| scene1 `cup:side` | 0.00 | 1.50 | 0.75 |"
+    assert targets.questions_by_user([trial(scene="scene2", task="cup:top_horizontal")]) == ""
+
+
 def test_trials_recorded_twice_are_taken_once_and_must_agree(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     a.write_text(json.dumps({"trials": [trial(seed=0), trial(seed=1)]}))

@@ -8,7 +8,8 @@ first task) is taken once, from the first file, and two records of it that disag
 then the files come from different models. Paired tests are recomputed on the pooled trials with the
 evaluation's own :func:`~sa_daemon.sim.evaluate.compare` (Wilcoxon by seed, Holm over every test of a
 (scene, task, user)), so a manual run on the same seeds joins the HO comparison's correction. A target
-whose trials are not in the files is reported as not measured, not as met. Prints a Markdown table.
+whose trials are not in the files is reported as not measured, not as met. Prints a Markdown table, then
+the policy's questions a task per user on the tasks with a question-count target.
 
 The targets (issue 16, "Targets"; the policy's trials unless named):
 
@@ -209,7 +210,29 @@ def markdown(rows: list[Row]) -> str:
     return "\n".join(lines) + f"\n\n{met} met, {unmet} not met, {len(rows) - met - unmet} not measured."
 
 
+def questions_by_user(trials: list[dict]) -> str:
+    """The policy's questions a task, per task with a question-count target and per user: which users the
+    task means are made of (a Markdown table; empty when no such task is in the trials)."""
+    keys = [k for k in _tasks(trials) if k in (*SCENE1_ASKING, EASY) or k[0] in ("study-simple", "study-complex")]
+    users = list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
+    if not keys:
+        return ""
+    lines = ["| questions a task | " + " | ".join(users) + " | all |", "|---" * (len(users) + 2) + "|"]
+    for key in keys:
+        ts = _of(trials, key)
+        cells = []
+        for u in users:
+            own = [t["questions"] for t in ts if t["user"] == u]
+            cells.append(f"{_mean(own):.2f}" if own else "-")
+        lines.append(f"| {_where(key)} | " + " | ".join(cells) + f" | {_mean([t['questions'] for t in ts]):.2f} |")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
-    print(markdown(report(load_trials(Path(p) for p in sys.argv[1:]))))
+    pooled = load_trials(Path(p) for p in sys.argv[1:])
+    print(markdown(report(pooled)))
+    by_user = questions_by_user(pooled)
+    if by_user:
+        print("\n" + by_user)
