@@ -99,9 +99,20 @@ def test_questions_by_user_shows_which_users_make_a_task_mean():
               for u, qs in (("calm", (0, 0)), ("paused", (1, 2))) for s, q in enumerate(qs)]
     trials.append(trial(task="cup:side", user="calm", method="ho", seed=0, questions=5))  # not the policy's
     table = targets.questions_by_user(trials).splitlines()
-    assert table[0] == "| questions a task | calm | paused | all |"
-    assert table[2] == "| scene1 `cup:side` | 0.00 | 1.50 | 0.75 |"
+    assert table[0] == "| questions a task | calm | paused | all | first question (s, mean) |"
+    assert table[2] == "| scene1 `cup:side` | 0.00 | 1.50 | 0.75 | - |"  # these records ask nothing
     assert targets.questions_by_user([trial(scene="scene2", task="cup:top_horizontal")]) == ""
+
+
+def test_outcome_ratios_per_user_use_successful_trials():
+    trials = [trial(user="a", method="ho", seed=0, time_s=10.0, joystick=200.0),
+              trial(user="a", method="ho", seed=1, time_s=100.0, joystick=900.0, success=False),
+              trial(user="a", seed=0, time_s=8.0, joystick=100.0),
+              trial(user="b", seed=0, time_s=8.0, joystick=100.0)]
+    table = targets.ratios_by_user(trials, "ho").splitlines()
+    assert table[0] == "| policy / ho: time / input | a | b |"
+    assert table[2] == "| scene1 `cup:top` | 0.80 / 0.50 | - / - |"  # b has no HO trial
+    assert targets.ratios_by_user(trials, "manual") == ""
 
 
 def test_trials_recorded_twice_are_taken_once_and_must_agree(tmp_path):

@@ -9,7 +9,8 @@ then the files come from different models. Paired tests are recomputed on the po
 evaluation's own :func:`~sa_daemon.sim.evaluate.compare` (Wilcoxon by seed, Holm over every test of a
 (scene, task, user)), so a manual run on the same seeds joins the HO comparison's correction. A target
 whose trials are not in the files is reported as not measured, not as met. Prints a Markdown table, then
-the policy's questions a task per user on the tasks with a question-count target.
+the policy's questions a task per user on the tasks with a question-count target (and when the first came),
+and per user its time and input over HO's and manual's on Table I and the simple study.
 
 The targets (issue 16, "Targets"; the policy's trials unless named):
 
@@ -217,14 +218,41 @@ def questions_by_user(trials: list[dict]) -> str:
     users = list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
     if not keys:
         return ""
-    lines = ["| questions a task | " + " | ".join(users) + " | all |", "|---" * (len(users) + 2) + "|"]
+    lines = ["| questions a task | " + " | ".join(users) + " | all | first question (s, mean) |",
+             "|---" * (len(users) + 3) + "|"]
     for key in keys:
         ts = _of(trials, key)
         cells = []
         for u in users:
             own = [t["questions"] for t in ts if t["user"] == u]
             cells.append(f"{_mean(own):.2f}" if own else "-")
-        lines.append(f"| {_where(key)} | " + " | ".join(cells) + f" | {_mean([t['questions'] for t in ts]):.2f} |")
+        first = question_measures(ts)["first_question_s"]
+        lines.append(f"| {_where(key)} | " + " | ".join(cells) + f" | {_mean([t['questions'] for t in ts]):.2f} | "
+                     + ("-" if first is None else f"{first:.1f}") + " |")
+    return "\n".join(lines)
+
+
+def ratios_by_user(trials: list[dict], baseline: str) -> str:
+    """The policy's mean completion time and joystick input over ``baseline``'s, successful trials only, per
+    Table I and simple-study task and per user, as ``time / input`` (below 1: the policy better); a
+    Markdown table, empty when ``baseline`` has no such trials."""
+    keys = [k for k in _tasks(trials) if (k == ("scene1", "cup:top") or k[0] == "study-simple")
+            and _of(trials, k, baseline)]
+    users = list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
+    if not keys:
+        return ""
+
+    def ratio(key: Key, user: str, metric: str) -> str:
+        means = []
+        for method in (POLICY, baseline):
+            done = [t[metric] for t in _of(trials, key, method) if t["user"] == user and t["success"]]
+            means.append(_mean(done) if done else None)
+        return "-" if None in means or not means[1] else f"{means[0] / means[1]:.2f}"
+
+    lines = [f"| policy / {baseline}: time / input | " + " | ".join(users) + " |", "|---" * (len(users) + 1) + "|"]
+    for key in keys:
+        lines.append(f"| {_where(key)} | " + " | ".join(
+            f"{ratio(key, u, 'completion_time_s')} / {ratio(key, u, 'joystick_input')}" for u in users) + " |")
     return "\n".join(lines)
 
 
@@ -233,6 +261,6 @@ if __name__ == "__main__":
         sys.exit(__doc__)
     pooled = load_trials(Path(p) for p in sys.argv[1:])
     print(markdown(report(pooled)))
-    by_user = questions_by_user(pooled)
-    if by_user:
-        print("\n" + by_user)
+    for table in (questions_by_user(pooled), ratios_by_user(pooled, "ho"), ratios_by_user(pooled, "manual")):
+        if table:
+            print("\n" + table)
