@@ -7,6 +7,7 @@
     [blend]      # alpha: the assistance level, 0.2-0.8 in a profile
     [speech]     # voice, rate_wpm, volume of the questions
     [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s
+    [reward]     # question_time_s: how long this person's questions stop the arm (s), what the planner charges
 
 Only these keys may appear; everything is validated as configuration is (an error names the file and
 the key), and a profile never changes what is not listed. ``run --profile NAME|FILE`` applies one at
@@ -33,6 +34,9 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
     "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s",
                           "withdraw_no_s"}),
+    # A question stops the arm until the person answers: a slow answerer's questions cost more, and the
+    # planner should charge what they cost this person (the ``answer`` events' ``after_s``).
+    "reward": frozenset({"question_time_s"}),
 }
 #: The assistance level a profile may choose (the paper's 0.5 in the middle): enough of the person's own
 #: input always passes, and enough assistance to matter.

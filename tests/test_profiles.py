@@ -66,10 +66,37 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     ({"name": "a", "input": {"filter_hz": -1}}, "filter_hz"),
     ({"name": "a", "blend": {"yield_near_m": 0.9}}, "yield_near_m"),  # above 0.5 m
     ({"summary": "no name"}, "name"),
+    ({"name": "a", "reward": {"question": -1.0}}, "reward.question:"),  # the paper's cost is not a person's
+    ({"name": "a", "reward": {"question_time_s": 2.5}}, "reward.question_time_s"),  # not whole rollout steps
 ])
 def test_a_bad_profile_is_refused_naming_the_key(data, key):
     with pytest.raises(ConfigError, match=key):
         parse_profile(data, "p.toml")
+
+
+def test_a_slow_answerer_s_profile_makes_the_planner_charge_their_questions_longer():
+    """``[reward] question_time_s``: the arm stands still until the person answers, so the watch model
+    charges a slow answerer's question more standing still. Fig. 5's moment (near the cup, top and side
+    even, the user turning): the question's value falls with the person's answer time, more than any
+    other action's."""
+    from test_when_to_ask import GOALS, NEAR_CUP, beliefs
+
+    from sa_daemon.model.actions import ActionKind, Mode
+    from sa_daemon.planner.snapshot import Snapshot
+    from sa_daemon.planner.solver import Solver
+
+    snap = Snapshot(GOALS, beliefs({"cup:top": 0.49, "cup:side": 0.49}), NEAR_CUP, np.zeros(6), mode=Mode.ROTATION,
+                    user_speed=(0.024, 0.0))
+    values = {}
+    for seconds in (2.0, 4.0):
+        cfg = parse_profile({"name": "sam", "reward": {"question_time_s": seconds}}, "sam.toml").apply(Config())
+        assert cfg.reward.question == Config().reward.question  # the paper's -5 is not a person's to set
+        values[seconds] = Solver(SharedAutonomyModel(cfg)).plan(snap).root_values
+    ask = [a for a in values[2.0] if a.kind is ActionKind.QUESTION and a.target == "cup:top"]
+    assert ask and values[4.0][ask[0]] < values[2.0][ask[0]] - 1.0
+    # A watch's value holds the questions it may ask later, so it falls too, but by less.
+    watch = [a for a in values[2.0] if a.kind is not ActionKind.QUESTION]
+    assert all(values[2.0][ask[0]] - values[4.0][ask[0]] > values[2.0][a] - values[4.0][a] for a in watch)
 
 
 # -- the stick ----------------------------------------------------------------------------------------------
