@@ -190,6 +190,10 @@ def test_policy_asks_holds_still_and_gets_an_answer(policy):
     r = policy.request({"cmd": "answer", "value": "no"})
     if not r["ok"]:
         assert r["error"] == "no question is pending"
+    # The person's answer times, against what the planner charges a question.
+    times = policy.request({"cmd": "status"})["answer_times"]
+    assert times["count"] >= 2 and times["charged_s"] == 0.0  # COMMIT_MODEL_TOML's question_time_s
+    assert times["median_s"] is not None and times["median_s"] >= 0.0
 
 
 def test_spoken_questions_leave_non_silent_wav_files(policy):

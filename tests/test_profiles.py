@@ -99,6 +99,29 @@ def test_a_slow_answerer_s_profile_makes_the_planner_charge_their_questions_long
     assert all(values[2.0][ask[0]] - values[4.0][ask[0]] > values[2.0][a] - values[4.0][a] for a in watch)
 
 
+def test_the_daemon_counts_a_persons_answer_times_and_suggests_what_their_profile_would_set():
+    """``status``'s ``answer_times``: from three answers on, the median answer time rounded up to whole
+    rollout steps; a profile switch (another person) counts afresh."""
+    import time
+
+    from sa_daemon.runtime.asking import Asker
+
+    cfg = Config()
+    ctl = Controller(cfg, load_scene("scene1").goals, "policy", 0.01)
+    asker = Asker(cfg, ctl, lambda kind, **fields: None)
+    assert asker.answer_times() == {"count": 0, "median_s": None, "charged_s": 2.0, "suggested_s": None}
+    for target, after in (("cup:top", 2.2), ("bowl:top", 3.4)):
+        ctl.ask(target, time.monotonic() - after)
+        asker.answer("no", "command")
+    assert asker.answer_times()["count"] == 2 and asker.answer_times()["suggested_s"] is None
+    ctl.ask("chips can:side", time.monotonic() - 2.6)
+    asker.answer("yes", "command")
+    times = asker.answer_times()
+    assert times["count"] == 3 and times["median_s"] == pytest.approx(2.6, abs=0.05) and times["suggested_s"] == 3.0
+    asker.reconfigure(cfg)
+    assert asker.answer_times()["count"] == 0
+
+
 # -- the stick ----------------------------------------------------------------------------------------------
 
 

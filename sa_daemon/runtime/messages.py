@@ -32,6 +32,7 @@ def status(v: View) -> dict[str, Any]:
         "profile": v.profile,
         "profiles": v.profiles(),
         "answers": ["yes", "no", "other"] if v.third_answer else ["yes", "no"],
+        "answer_times": v.answer_times(),
         "assist": v.assist,
         "uptime_s": round(v.t, 3),
         "scene": v.scene,

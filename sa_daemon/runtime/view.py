@@ -198,6 +198,9 @@ class View:
         s = self._d.asker.speaker
         return s.status() if s is not None else None
 
+    def answer_times(self) -> dict[str, Any]:
+        return self._d.asker.answer_times()
+
     def voice(self) -> dict[str, Any] | None:
         v = self._d.asker.voice
         return v.status() if v is not None else None
