@@ -106,9 +106,9 @@ class Asker:
         except ValueError as e:  # the third answer off, or the object has one grasp type only
             raise RequestError(str(e)) from None
         self.cleared()
-        self._after_s.append(now - q.asked_at)
-        self._event("answer", goal=q.target, value=value, source=source,
-                    after_s=round(now - q.asked_at, 3), **detail)
+        after_s = now - q.asked_at
+        self._after_s.append(after_s)
+        self._event("answer", goal=q.target, value=value, source=source, after_s=round(after_s, 3), **detail)
 
     def expire(self, now: float) -> None:
         """Drop the pending question after ``runtime.question_timeout_s``."""
