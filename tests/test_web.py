@@ -373,6 +373,10 @@ def test_in_chromium_yes_answers_the_question_and_stop_stops(live, browser, tmp_
     _, ans = c.event("answer", timeout_s=10, start=i)
     assert ans["value"] == "yes" and ans["source"] == "command"
     until(lambda: browser.find_element(By.ID, "question").text != shown, 10, "the question cleared")
+    # The person's answer times, as status gives them (the page asks again after each answer).
+    times = d.request({"cmd": "status"})["answer_times"]
+    until(lambda: browser.find_element(By.ID, "answer-times").text.startswith(f"Answers: {times['count']}, median "),
+          10, "the answer times on the page")
 
     # Stop: latched, and the command is zero from the first control tick after the latch.
     i = len(c)

@@ -161,12 +161,22 @@ function onReply(msg) {
     sel.replaceChildren(...(msg.profiles || []).map((n) => { const o = document.createElement("option"); o.value = o.textContent = n; return o; }));
     if (msg.profile) sel.value = msg.profile;
     $("profile-note").textContent = msg.profile ? `in force: ${msg.profile}` : "no profile";
+    $("answer-times").textContent = answerTimes(msg.answer_times);
   } else if (msg.cmd === "set_profile" || (msg.type === "refused")) {
     $("profile-note").textContent = msg.ok ? `switched to ${msg.profile}` : (msg.error || msg.reason || "");
   }
 }
 
+// How long this person takes to answer, against what the planner charges a question (status.answer_times).
+function answerTimes(a) {
+  if (!a || !a.count) return "";
+  const tail = a.suggested_s !== null && a.suggested_s > a.charged_s
+    ? `: slower than the ${a.charged_s} s the planner charges; a profile could set question_time_s = ${a.suggested_s}` : "";
+  return `Answers: ${a.count}, median ${a.median_s.toFixed(1)} s${tail}`;
+}
+
 function onEvent(e) {
+  if (e.type === "answer") send({cmd: "status"});  // the answer times have changed
   const li = document.createElement("li");
   const detail = Object.entries(e).filter(([k]) => k !== "t" && k !== "type")
     .map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`).join(" ");
