@@ -15,8 +15,9 @@ Printed per question and summed (:func:`summary`, which also reads a ``--json`` 
 model's **predicted margin** (the question's root value minus the best other action's, reward units, at
 the plan that asked) and the **realised saving** (completion time without the question minus with it, s;
 a trial that fails on either side is counted apart). A question the model values well above watching
-that saves the person no time on average is one the model overvalues. A measuring script, not an interface: it reads the plan's root values and swaps the
-controller's input at one point (``Controller.accept_plan``).
+that saves the person no time on average is one the model overvalues. A measuring script, not an
+interface: it reads the plan's root values and swaps the controller's input at one point
+(``Controller.accept_plan``).
 """
 
 from __future__ import annotations

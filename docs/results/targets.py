@@ -83,6 +83,16 @@ def _of(trials: list[dict], key: Key, method: str = POLICY) -> list[dict]:
     return [t for t in trials if (t["scene"], t["task"]) == key and t["method"] == method]
 
 
+def _compared(trials: list[dict]) -> list[Key]:
+    """The tasks the policy is compared with HO and manual on: Table I and the simple study's."""
+    return [k for k in _tasks(trials) if k == ("scene1", "cup:top") or k[0] == "study-simple"]
+
+
+def _users(trials: list[dict]) -> list[str]:
+    """The users of the policy's trials, in the order they first appear."""
+    return list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
+
+
 def _mean(values: list[float]) -> float:
     return sum(values) / len(values)
 
@@ -147,7 +157,7 @@ def against(trials: list[dict], comparisons: list[dict], baseline: str) -> list[
     manual the target is no user significantly worse; against HO, every user's paired median better, none
     significantly worse, and every user significantly better where the paper found it (module doc)."""
     rows = []
-    for key in [k for k in _tasks(trials) if k == ("scene1", "cup:top") or k[0] == "study-simple"]:
+    for key in _compared(trials):
         users = sorted({t["user"] for t in _of(trials, key)})
         tests = {(c["user"], c["metric"]): c for c in comparisons
                  if (c["scene"], c["task"]) == key and c["baseline"] == baseline and c["p_holm"] is not None}
@@ -215,7 +225,7 @@ def questions_by_user(trials: list[dict]) -> str:
     """The policy's questions a task, per task with a question-count target and per user: which users the
     task means are made of (a Markdown table; empty when no such task is in the trials)."""
     keys = [k for k in _tasks(trials) if k in (*SCENE1_ASKING, EASY) or k[0] in ("study-simple", "study-complex")]
-    users = list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
+    users = _users(trials)
     if not keys:
         return ""
     lines = ["| questions a task | " + " | ".join(users) + " | all | first question (s, mean) |",
@@ -236,9 +246,8 @@ def ratios_by_user(trials: list[dict], baseline: str) -> str:
     """The policy's mean completion time and joystick input over ``baseline``'s, successful trials only, per
     Table I and simple-study task and per user, as ``time / input`` (below 1: the policy better); a
     Markdown table, empty when ``baseline`` has no such trials."""
-    keys = [k for k in _tasks(trials) if (k == ("scene1", "cup:top") or k[0] == "study-simple")
-            and _of(trials, k, baseline)]
-    users = list(dict.fromkeys(t["user"] for t in trials if t["method"] == POLICY))
+    keys = [k for k in _compared(trials) if _of(trials, k, baseline)]
+    users = _users(trials)
     if not keys:
         return ""
 
