@@ -698,6 +698,11 @@ class AskingConfig(_Section):
         "misheard or mistaken no about the person's goal no longer keeps the arm from it; 2 s by default since "
         "session 28 (chosen by a rule written before its run; docs/model.md), 0 = a no is final (our reading)",
     )
+    learn_answer_time: bool = Field(
+        False, description="the planner charges a question this person's median answer time, the prior "
+        "reward.question_time_s counted as one answer, rounded up to whole planner.rollout_step_s steps "
+        "(control/answer_time.py); the count goes on across tasks and starts again at a profile switch",
+    )
     answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
         ("button", "command", "voice"),
         description="where answers are taken from: the joystick's buttons, the protocol (and the page), the voice",

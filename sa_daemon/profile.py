@@ -6,7 +6,7 @@
     [input]      # filter_hz: the tremor filter
     [blend]      # alpha: the assistance level, 0.2-0.8 in a profile
     [speech]     # voice, rate_wpm, volume of the questions
-    [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s
+    [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s, learn_answer_time
     [reward]     # question_time_s: how long this person's questions stop the arm (s), what the planner charges
 
 Only these keys may appear; everything is validated as configuration is (an error names the file and
@@ -33,7 +33,7 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
     "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
     "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s",
-                          "withdraw_no_s"}),
+                          "withdraw_no_s", "learn_answer_time"}),
     # A question stops the arm until the person answers: a slow answerer's questions cost more, and the
     # planner should charge what they cost this person (the ``answer`` events' ``after_s``).
     "reward": frozenset({"question_time_s"}),

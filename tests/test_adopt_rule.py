@@ -178,3 +178,28 @@ def test_s37_weighs_issue_16s_targets_and_a_lost_prediction_is_not_a_veto(adopt,
     assert "Rule s37: adopt" in out
     assert "correct prediction >= 0.9 (scene2 `drill:side_vertical`): False -> True" in out
     assert adopt.judge_targets(met_old, met_old) == ["(t) issue 16's targets met 2 -> 2"]  # prediction, success
+
+
+def test_s39_needs_the_policy_significantly_faster_on_the_trials_both_succeed(adopt, tmp_path, capsys):
+    """Session 39's form: s32 and (h). Ten paired trials each 1 s faster pass (exact two-sided p = 0.002);
+    the same with one trial failing under the option pass on the nine left; five faster and five slower,
+    or only three faster (p = 0.25), do not."""
+    old = {("scene1", "cup:top", "policy", "u1"): (10, 10.0, 1.0)}
+    a, b = _suite(old), _suite(old)
+    for t in a["trials"]:
+        t["completion_time_s"] = 9.0
+    assert adopt.judge_times(*adopt.paired_times(a, b)) == []
+    a["trials"][0].update(success=False, completion_time_s=100.0)
+    option, default = adopt.paired_times(a, b)
+    assert len(option) == 9 and adopt.judge_times(option, default) == []
+    for t in a["trials"][:5]:
+        t.update(success=True, completion_time_s=11.0)
+    assert adopt.judge_times(*adopt.paired_times(a, b))[0].startswith("(h) paired time over 10 trials")
+    for i, t in enumerate(a["trials"]):
+        t["completion_time_s"] = 9.0 if i < 3 else 10.0
+    assert adopt.judge_times(*adopt.paired_times(a, b)) != []
+    for tag, suite in (("old", b), ("new", {**a, "trials": [{**t, "completion_time_s": 9.0} for t in a["trials"]]})):
+        (tmp_path / f"suite-table1-{tag}.json").write_text(json.dumps(suite))
+    assert adopt.main(["new", "--dir", str(tmp_path), "--default", "old", "--default-dir", str(tmp_path),
+                       "--rule", "s39"]) == 0
+    assert "Rule s39: adopt" in capsys.readouterr().out

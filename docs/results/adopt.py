@@ -1,6 +1,6 @@
 """Session 19's rule for adopting a model or tracker option as the default, checked on suite files.
 
-    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28|s28b|s29|s32]
+    python docs/results/adopt.py TAG [--dir DIR] [--default marginal] [--default-dir DIR] [--rule s19|s28|...|s39]
 
 reads ``DIR/suite-{table1,study-simple,fig7}-TAG.json`` (the option's runs, ``DIR`` defaults to this folder)
 and ``DEFAULT_DIR/suite-{...}-marginal.json`` (the default's, this folder unless told), paired by (scene,
@@ -48,6 +48,15 @@ both sides' files:
     rows than on the default's: a correct prediction lost below 0.9 on a task is a row lost, weighed with
     the rest, not a veto.
 
+``--rule s39`` is s32 with (h) added, written in session 39 for ``asking.learn_answer_time``, a candidate
+that changes only the trials of a person whose answers are not within a rollout step of the charged time
+(of the simulated users the hesitant one; ``docs/results.md``, "Session 39"), judged on that person's
+policy trials alone:
+
+(h) over the rule suites' policy trials paired by (scene, task, user, seed) that both configurations
+    succeed on, the option is faster: the median of the paired time differences below zero and the
+    two-sided Wilcoxon signed-rank p-value (``sim.stats.paired_wilcoxon``) below 0.05.
+
 Also printed, for every suite present (the 22-goal one included, which the rule does not count): successes,
 mean time, the policy's prediction and questions per task, old -> new, and the policy-against-HO verdicts.
 """
@@ -64,6 +73,7 @@ from report import verdicts
 from targets import load_trials, report
 
 from sa_daemon.sim.evaluate import summarise, trial_key
+from sa_daemon.sim.stats import paired_wilcoxon
 
 HERE = Path(__file__).resolve().parent
 RULE_SUITES = ("table1", "study-simple", "fig7")
@@ -204,6 +214,24 @@ def prediction_flips(new: dict, old: dict) -> dict[tuple[str, str], tuple[int, i
             for k, (lost, gained) in _flip_counts(_policy_pairs(new, old, "correct_prediction")).items()}
 
 
+def paired_times(new: dict, old: dict) -> tuple[list[float], list[float]]:
+    """Rule s39's (h): the policy's completion times (s) of the trials both configurations succeed on,
+    ``(option's, default's)`` paired by scene, task, user and seed."""
+    before = {trial_key(t): t for t in old["trials"]}
+    pairs = [(t["completion_time_s"], o["completion_time_s"]) for t in new["trials"]
+             if t["method"] == "policy" and (o := before.get(trial_key(t))) is not None and t["success"] and o["success"]]
+    return [p[0] for p in pairs], [p[1] for p in pairs]
+
+
+def judge_times(option_s: list[float], default_s: list[float]) -> list[str]:
+    """(h): a failure line unless the option is significantly faster over the pairs."""
+    test = paired_wilcoxon(option_s, default_s)
+    if test.median_diff is not None and test.median_diff < 0 and test.p_value is not None and test.p_value < ALPHA:
+        return []
+    return [f"(h) paired time over {test.n_pairs} trials: median difference {_f(test.median_diff, 3)} s, "
+            f"p = {_f(test.p_value, 3)}"]
+
+
 def judge(rows: list[dict], cells: dict[str, list[int]],
           logp: dict[tuple[str, str], tuple[float, float, float]] | None = None,
           flips: dict[tuple[str, str], tuple[int, int, float]] | None = None,
@@ -266,9 +294,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", type=Path, default=HERE, help="where the option's suite files are")
     ap.add_argument("--default", default="marginal", help="the default's file tag")
     ap.add_argument("--default-dir", type=Path, default=HERE, help="where the default's suite files are")
-    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29", "s32", "s37"), default="s19",
+    ap.add_argument("--rule", choices=("s19", "s28", "s28b", "s29", "s32", "s37", "s39"), default="s19",
                     help="s19: session 19's rule; s28, s28b, s29, s32: for options that leave the tracker; "
-                    "s37: for options whose gain is issue 16's targets")
+                    "s37: for options whose gain is issue 16's targets; s39: s32 and the paired time (h)")
     ap.add_argument("--manual", help="rule s37: the tag of the manual runs on the same seeds (in --dir)")
     args = ap.parse_args(argv)
     judged_rows: list[dict] = []
@@ -276,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     judged_flips: dict[tuple[str, str], tuple[int, int, float]] = {}
     judged_successes: dict[tuple[str, str, str], tuple[int, int, float]] = {}
     judged_cells: dict[str, list[int]] = {}
+    judged_times: tuple[list[float], list[float]] = ([], [])
     lines = ["| suite | task | method | successes | time s | prediction | questions |", "|" + "---|" * 7]
     for suite in ALL_SUITES:
         path = args.dir / f"suite-{suite}-{args.tag}.json"
@@ -287,7 +316,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{suite}: no {old_path.name} to compare with; skipped", file=sys.stderr)
             continue
         old = json.loads(old_path.read_text())
-        cells = paired_cell_changes(new, old) if args.rule in ("s32", "s37") else cell_changes(new, old)
+        cells = paired_cell_changes(new, old) if args.rule in ("s32", "s37", "s39") else cell_changes(new, old)
         rows, logp = task_rows(new, old), logp_changes(new, old)
         flips, successes = prediction_flips(new, old), success_flips(new, old)
         for (scene, task, method), (lost, gained, p) in successes.items():
@@ -311,6 +340,8 @@ def main(argv: list[str] | None = None) -> int:
             judged_logp.update(logp)
             judged_flips.update(flips)
             judged_successes.update(successes)
+            for mine, theirs in zip(judged_times, paired_times(new, old), strict=True):
+                mine += theirs
             for m, (f, s) in cells.items():
                 judged_cells.setdefault(m, [0, 0])
                 judged_cells[m][0] += f
@@ -320,9 +351,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print("\n" + "\n".join(lines) + "\n")
     # s37 has no prediction part of its own ((t) weighs the predictions): no flips, and not None, which is (a)
-    flips = {} if args.rule == "s37" else judged_flips if args.rule in ("s28b", "s29", "s32") else None
+    flips = {} if args.rule == "s37" else judged_flips if args.rule in ("s28b", "s29", "s32", "s39") else None
     fails = judge(judged_rows, judged_cells, judged_logp if args.rule == "s28" else None, flips,
-                  judged_successes if args.rule in ("s29", "s32", "s37") else None)
+                  judged_successes if args.rule in ("s29", "s32", "s37", "s39") else None)
+    if args.rule == "s39":
+        fails += judge_times(*judged_times)
     if args.rule == "s37":
         manual = [args.dir / f"suite-{s}-{args.manual}.json" for s in ("table1", "study-simple")] if args.manual else []
         sides = [[d / f"suite-{s}-{t}.json" for s in ALL_SUITES if (d / f"suite-{s}-{t}.json").exists()] + manual

@@ -33,6 +33,7 @@ from ..model.model import Command, SharedAutonomyModel
 from ..model.twists import axes_to_twist
 from ..planner.snapshot import PlanResult, Snapshot
 from ..world.goalset import GoalSet
+from .answer_time import AnswerTime
 from .lowpass import LowPass
 from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
 from .safety import SafetyPipeline
@@ -65,6 +66,7 @@ class Controller:
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
         self._withdrawal = AnswerWithdrawal(cfg)  # asking.withdraw_yes_s, asking.withdraw_no_s
+        self._answer_time = AnswerTime(cfg)  # this person's answer times, across tasks
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
         self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
         self._t_input = -math.inf
@@ -100,6 +102,11 @@ class Controller:
     def asked(self) -> frozenset[str]:
         """The targets asked about in this task."""
         return frozenset(self._asked)
+
+    @property
+    def answer_time(self) -> AnswerTime:
+        """This person's answer times and what the planner charges a question (``asking.learn_answer_time``)."""
+        return self._answer_time
 
     @property
     def questions_asked(self) -> int:
@@ -258,6 +265,7 @@ class Controller:
         self._belief = self._model.update_answer(self._belief, q.target, answer if answer == "other" else
                                                  answer in (True, "yes"))
         self._withdrawal.answered()
+        self._answer_time.record(t - q.asked_at)
         self._question = None
         self.drop_plan()
         return q
@@ -285,7 +293,7 @@ class Controller:
         snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
                         self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
                         questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor,
-                        pose_log_w=b.pose_log_w)
+                        pose_log_w=b.pose_log_w, question_time_s=self._answer_time.charged_s)
         self._issued[snap] = self._task
         return snap
 
@@ -381,6 +389,7 @@ class Controller:
         if cfg.blend.opposition_window_s != self._opposition.window_s:
             self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
         self._withdrawal.reconfigure(cfg)
+        self._answer_time.reconfigure(cfg)  # another person: their answer times count afresh
 
     def require_stop_test(self) -> None:
         """No assistance, no plans and no motion until a stop has been latched and resumed once."""

@@ -34,7 +34,8 @@ class Snapshot:
     tracker measures a turn's charge (``None``: at ``pose``, as a belief that has seen no input).
     ``pose_log_w``: each goal's posterior over its grasp poses, ``(G, K)`` log-weights
     (:attr:`~..model.belief.Belief.pose_log_w`; ``None``: uniform), from which the goals' poses are
-    taken under ``intent.reach_pose = "tracked"``.
+    taken under ``intent.reach_pose = "tracked"``. ``question_time_s``: how long a question would stop the
+    arm for this person (s, :class:`~..control.answer_time.AnswerTime`; ``None``: ``reward.question_time_s``).
     """
 
     goals: GoalSet
@@ -50,6 +51,7 @@ class Snapshot:
     questions_left: int | None = None
     anchor: FloatArray | None = None
     pose_log_w: FloatArray | None = None
+    question_time_s: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.goals, GoalSet):
@@ -84,6 +86,13 @@ class Snapshot:
             object.__setattr__(self, "pose_log_w", w)
         if self.questions_left is not None and (not isinstance(self.questions_left, int) or self.questions_left < 0):
             raise ValueError("questions_left must be None or an integer >= 0")
+        if self.question_time_s is not None and not (math.isfinite(self.question_time_s) and self.question_time_s >= 0):
+            raise ValueError("question_time_s must be None or a finite number of seconds >= 0")
+
+    def question_seconds(self, default_s: float) -> float:
+        """What a question stops the arm for (s): :attr:`question_time_s`, else ``default_s``
+        (``reward.question_time_s``)."""
+        return default_s if self.question_time_s is None else float(self.question_time_s)
 
     def to_dict(self) -> dict:
         """Plain (JSON-ready) form."""
@@ -101,6 +110,7 @@ class Snapshot:
             "questions_left": self.questions_left,
             "anchor": self.anchor.tolist(),
             "pose_weights": None if self.pose_log_w is None else np.exp(self.pose_log_w).tolist(),
+            "question_time_s": self.question_time_s,
         }
 
     @classmethod
@@ -119,6 +129,7 @@ class Snapshot:
             questions_left=d.get("questions_left"),
             anchor=d.get("anchor"),
             pose_log_w=None if d.get("pose_weights") is None else _log(np.asarray(d["pose_weights"], dtype=float)),
+            question_time_s=d.get("question_time_s"),
         )
 
 

@@ -4,9 +4,10 @@ Every plan is judged by the return of section III-E's reward over the same horiz
 planner.horizon_s`` from now, undiscounted (``n`` steps of ``dt = planner.rollout_step_s``; the
 reward per paper step ``reward.step_s``: the distance reward ``R_d`` to the goal's ``k_c``, ``-5`` for
 opposing the user, ``+100`` once at the goal, which is terminal; :mod:`.rollouts`). A question costs the
-paper's ``-5`` plus ``R_d`` at the pose where the arm stands still for ``reward.question_time_s``: dear
-far from the goals, cheap near them, and no discount artefact. Values are vectors over the goal ``g``
-the user really wants; with ``s`` steps left at belief ``b`` and pose ``x``:
+paper's ``-5`` plus ``R_d`` at the pose where the arm stands still for ``reward.question_time_s`` (the
+person's where the snapshot has it, ``Snapshot.question_time_s``): dear far from the goals, cheap near
+them, and no discount artefact. Values are vectors over the goal ``g`` the user really wants; with ``s``
+steps left at belief ``b`` and pose ``x``:
 
     commit_a[g]  = M_x[g, a, s]                                               (:mod:`.rollouts`)
     ask_q[g]     = -5 + n_q stay_x[g] + P(yes | g) D(b_yes, x, s - n_q)[g] + P(no | g) D(b_no, x, s - n_q)[g]
@@ -107,7 +108,7 @@ class WatchSearch:
         self.dt = pc.rollout_step_s
         self.n = max(1, round(pc.horizon_s / self.dt))
         self.n_w = min(self.n - 1, max(1, round(pc.watch_s / self.dt)))
-        self.n_q = max(1, round(cfg.reward.question_time_s / self.dt))
+        self.n_q = max(1, round(snap.question_seconds(cfg.reward.question_time_s) / self.dt))
         self.max_q = pc.max_questions if snap.questions_left is None else min(pc.max_questions, snap.questions_left)
         p = cfg.intent.answer_p_correct
         qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)

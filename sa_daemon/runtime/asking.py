@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
-import statistics
 import time
 from collections.abc import Callable
 from typing import Any
@@ -42,29 +40,23 @@ class Asker:
         self.speaker = speaker
         self.voice = voice  # speech.listener.VoiceListener when voice.enabled
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._after_s: list[float] = []  # this person's answer times (s)
 
     def reconfigure(self, cfg: Config) -> None:
-        """A person's profile: the answer sources they use, their voice, rate and volume. Their answer
-        times are counted afresh."""
+        """A person's profile: the answer sources they use, their voice, rate and volume. (Their answer
+        times count afresh in the controller's :class:`~..control.answer_time.AnswerTime`.)"""
         self._cfg = cfg
-        self._after_s = []
         if self.speaker is not None:
             self.speaker.configure(cfg.speech)
 
     def answer_times(self) -> dict[str, Any]:
         """How long this person takes to answer, against what the planner charges a question: ``count``
         answers since the start or the last profile switch, their ``median_s`` (s, from the question to
-        the answer), ``charged_s`` (``reward.question_time_s``) and, from three answers on,
-        ``suggested_s``: the median rounded up to whole ``planner.rollout_step_s`` steps, what a profile
-        would set (``docs/profiles.md``, "A slow answerer"); ``None`` where there is nothing to say."""
-        n = len(self._after_s)
-        median = statistics.median(self._after_s) if n else None
-        step = self._cfg.planner.rollout_step_s
-        suggested = max(1, math.ceil(median / step - 1e-9)) * step if median is not None and n >= 3 else None
-        return {"count": n, "median_s": None if median is None else round(median, 3),
-                "charged_s": self._cfg.reward.question_time_s,
-                "suggested_s": None if suggested is None else round(suggested, 6)}
+        the answer), ``charged_s`` (what the planner charges now: ``reward.question_time_s``, or the
+        learned time with ``asking.learn_answer_time``, then ``learning`` is true) and, from three
+        answers on, ``suggested_s``: the median rounded up to whole ``planner.rollout_step_s`` steps,
+        what a profile would set (``docs/profiles.md``, "A slow answerer"); ``None`` where there is
+        nothing to say."""
+        return self._ctl.answer_time.summary()
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         """The event loop that speech and voice callbacks are moved onto."""
@@ -107,7 +99,6 @@ class Asker:
             raise RequestError(str(e)) from None
         self.cleared()
         after_s = now - q.asked_at
-        self._after_s.append(after_s)
         self._event("answer", goal=q.target, value=value, source=source, after_s=round(after_s, 3), **detail)
 
     def expire(self, now: float) -> None:

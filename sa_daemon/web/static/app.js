@@ -170,8 +170,10 @@ function onReply(msg) {
 // How long this person takes to answer, against what the planner charges a question (status.answer_times).
 function answerTimes(a) {
   if (!a || !a.count) return "";
-  const tail = a.suggested_s !== null && a.suggested_s > a.charged_s
-    ? `: slower than the ${a.charged_s} s the planner charges; a profile could set question_time_s = ${a.suggested_s}` : "";
+  let tail = "";
+  if (a.learning) tail = `: the planner charges ${a.charged_s} s a question, learned from them`;
+  else if (a.suggested_s !== null && a.suggested_s > a.charged_s)
+    tail = `: slower than the ${a.charged_s} s the planner charges; a profile could set question_time_s = ${a.suggested_s}`;
   return `Answers: ${a.count}, median ${a.median_s.toFixed(1)} s${tail}`;
 }
 
