@@ -203,3 +203,13 @@ def test_s39_needs_the_policy_significantly_faster_on_the_trials_both_succeed(ad
     assert adopt.main(["new", "--dir", str(tmp_path), "--default", "old", "--default-dir", str(tmp_path),
                        "--rule", "s39"]) == 0
     assert "Rule s39: adopt" in capsys.readouterr().out
+
+
+def test_s39b_reads_the_changed_trials_where_s39_s_median_sees_only_the_unchanged(adopt):
+    """Thirty unchanged trials and eight each 3 s faster: the median difference is 0, so (h) refuses what
+    (h') (the mean, -0.63 s; exact p = 0.008 on the eight) takes. Eight slower the same way: both refuse."""
+    option, default = [10.0] * 30 + [7.0] * 8, [10.0] * 38
+    assert adopt.judge_times(option, default)[0].startswith("(h) paired time over 38 trials: median difference 0.000")
+    assert adopt.judge_times(option, default, centre="mean") == []
+    slower = [10.0] * 30 + [13.0] * 8
+    assert adopt.judge_times(slower, default, centre="mean")[0].startswith("(h') paired time over 38 trials: mean")
