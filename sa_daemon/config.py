@@ -699,9 +699,11 @@ class AskingConfig(_Section):
         "session 28 (chosen by a rule written before its run; docs/model.md), 0 = a no is final (our reading)",
     )
     learn_answer_time: bool = Field(
-        False, description="the planner charges a question this person's median answer time, the prior "
+        True, description="the planner charges a question this person's median answer time, the prior "
         "reward.question_time_s counted as one answer, rounded up to whole planner.rollout_step_s steps "
-        "(control/answer_time.py); the count goes on across tasks and starts again at a profile switch",
+        "(control/answer_time.py; a prior of 0 stays 0); the count goes on across tasks and starts again at a "
+        "profile switch; the default since session 39 (rule s39b, written before its run; docs/results.md), "
+        "false = always reward.question_time_s",
     )
     answer_sources: tuple[Literal["button", "command", "voice"], ...] = Field(
         ("button", "command", "voice"),

@@ -18,7 +18,8 @@ from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
 from sa_daemon.world.scene import load_scene
 
-LEARN = config_from_dict({"asking": {"learn_answer_time": True}})
+LEARN = Config()  # learning is the default since session 39
+FIXED = config_from_dict({"asking": {"learn_answer_time": False}})
 
 
 @pytest.mark.parametrize(("answers", "charged"), [
@@ -41,13 +42,14 @@ def test_the_charge_is_the_median_of_the_prior_and_the_answers_in_whole_rollout_
 
 
 def test_without_learning_the_charge_stays_the_configured_one_and_the_suggestion_waits_for_three_answers():
-    times = AnswerTime(Config())
+    times = AnswerTime(FIXED)
     for a in (4.0, 3.6):
         times.record(a)
     assert times.charged_s == 2.0 and times.suggested_s is None
     times.record(3.1)
     assert times.charged_s == 2.0 and times.median_s == pytest.approx(3.6) and times.suggested_s == 4.0
     assert times.summary() == {"count": 3, "median_s": 3.6, "charged_s": 2.0, "learning": False, "suggested_s": 4.0}
+    assert AnswerTime(LEARN).summary()["learning"] is True
 
 
 def test_an_impossible_answer_time_is_not_counted_and_a_profile_switch_counts_afresh():
@@ -57,8 +59,14 @@ def test_an_impossible_answer_time_is_not_counted_and_a_profile_switch_counts_af
     assert times.count == 0 and times.charged_s == 2.0
     times.record(4.0)
     assert times.charged_s == 3.0
-    times.reconfigure(config_from_dict({"asking": {"learn_answer_time": True}, "reward": {"question_time_s": 1.0}}))
+    times.reconfigure(config_from_dict({"reward": {"question_time_s": 1.0}}))
     assert times.count == 0 and times.charged_s == 1.0
+
+
+def test_a_prior_of_zero_the_commit_model_s_paper_reading_is_not_learned_away():
+    times = AnswerTime(config_from_dict({"planner": {"model": "commit"}, "reward": {"question_time_s": 0.0}}))
+    times.record(4.0)
+    assert times.charged_s == 0.0 and times.median_s == 4.0
 
 
 def _answer_after(ctl: Controller, after_s: float, t: float) -> float:
@@ -81,7 +89,7 @@ def test_the_controller_charges_the_planner_what_this_person_takes_across_tasks(
     assert ctl.snapshot(pose, None).question_time_s == 3.0 and ctl.answer_time.count == 1
     ctl.reconfigure(LEARN)
     assert ctl.snapshot(pose, None).question_time_s == 2.0 and ctl.answer_time.count == 0
-    fixed = Controller(Config(), goals, "policy", 0.01)
+    fixed = Controller(FIXED, goals, "policy", 0.01)
     _answer_after(fixed, 4.0, 10.0)
     assert fixed.snapshot(pose, None).question_time_s == 2.0 and fixed.answer_time.median_s == 4.0
 

@@ -109,7 +109,7 @@ def test_the_daemon_counts_a_persons_answer_times_and_suggests_what_their_profil
     cfg = Config()
     ctl = Controller(cfg, load_scene("scene1").goals, "policy", 0.01)
     asker = Asker(cfg, ctl, lambda kind, **fields: None)
-    assert asker.answer_times() == {"count": 0, "median_s": None, "charged_s": 2.0, "learning": False,
+    assert asker.answer_times() == {"count": 0, "median_s": None, "charged_s": 2.0, "learning": True,
                                     "suggested_s": None}
     for target, after in (("cup:top", 2.2), ("bowl:top", 3.4)):
         ctl.ask(target, time.monotonic() - after)
@@ -119,6 +119,7 @@ def test_the_daemon_counts_a_persons_answer_times_and_suggests_what_their_profil
     asker.answer("yes", "command")
     times = asker.answer_times()
     assert times["count"] == 3 and times["median_s"] == pytest.approx(2.6, abs=0.05) and times["suggested_s"] == 3.0
+    assert times["charged_s"] == 3.0  # learned: median(2, 2.2, 3.4, 2.6) = 2.4, up to whole steps
     ctl.reconfigure(cfg)  # a profile switch, as the daemon makes it (another person)
     asker.reconfigure(cfg)
     assert asker.answer_times()["count"] == 0

@@ -239,8 +239,8 @@ def judge_times(option_s: list[float], default_s: list[float], centre: str = "me
     if mid is not None and mid < 0 and test.p_value is not None and test.p_value < ALPHA:
         return []
     part = "(h)" if centre == "median" else "(h')"
-    return [f"{part} paired time over {test.n_pairs} trials: {centre} difference {_f(mid, 3)} s, "
-            f"p = {_f(test.p_value, 3)}"]
+    line = f"{part} paired time over {test.n_pairs} trials: {centre} difference {_f(mid, 3)} s, p = {_f(test.p_value, 3)}"
+    return [line]
 
 
 def judge(rows: list[dict], cells: dict[str, list[int]],

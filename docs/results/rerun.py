@@ -37,7 +37,7 @@ BEFORE_THE_KEY = {
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
-    "asking": {"withdraw_no_s": 0.0, "withdraw_yes_s": 0.0},
+    "asking": {"withdraw_no_s": 0.0, "withdraw_yes_s": 0.0, "learn_answer_time": False},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
@@ -52,7 +52,8 @@ existed since session 27, off; files recorded before it lack it, and it became 2
 without ``planner.rank_goals`` (session 32) ranked the top goals by their own probability (``"goal"``;
 ``"cover"`` since session 33); one without ``intent.copy_weights`` (session 19) gave a target's copies
 equal shares, and one without ``planner.user_speed_unused`` (session 35) predicted a mode not yet entered
-still (``"poses"`` and ``"deflection"`` since session 37). The ``-turn-charge`` files (session 22) measured
+still (``"poses"`` and ``"deflection"`` since session 37); one without ``asking.learn_answer_time``
+(session 39) charged every question ``reward.question_time_s``. The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 

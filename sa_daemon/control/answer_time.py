@@ -11,8 +11,10 @@ charges the planner
 
 where ``T_0 = reward.question_time_s`` is the prior counted as one answer and ``dt`` the rollout step:
 one slow answer moves the charge halfway (a 4 s answer after the 2 s prior: 3 s), an outlier among
-several does not, and a person who answers within a step of the prior is charged the prior. The count
-goes on across tasks and starts again when the settings change (a profile switch: another person).
+several does not, and a person who answers within a step of the prior is charged the prior. A prior of
+0 (the commit model's paper reading: a question costs its ``-5`` alone) stays 0. The count goes on
+across tasks and starts again when the settings change (a profile switch: another person). On by
+default since session 39 (``docs/results.md``, "Session 39").
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ class AnswerTime:
     def charged_s(self) -> float:
         """What the planner charges a question now (s): ``reward.question_time_s``, or with
         ``asking.learn_answer_time`` the module doc's ``T_q``."""
-        if not self._learn or not self._times_s:
+        if not self._learn or not self._times_s or self._prior_s <= 0.0:
             return self._prior_s
         return whole_steps(statistics.median([self._prior_s, *self._times_s]), self._step_s)
 
