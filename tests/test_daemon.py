@@ -193,6 +193,7 @@ def test_policy_asks_holds_still_and_gets_an_answer(policy):
     # The person's answer times, against what the planner charges a question.
     times = policy.request({"cmd": "status"})["answer_times"]
     assert times["count"] >= 2 and times["charged_s"] == 0.0  # COMMIT_MODEL_TOML's question_time_s
+    assert times["learning"] is True  # the default; a prior of 0 (the commit model's paper reading) stays 0
     assert times["median_s"] is not None and times["median_s"] >= 0.0
 
 
