@@ -4,6 +4,7 @@ time (``asking.learn_answer_time``, ``control/answer_time.py``)."""
 from __future__ import annotations
 
 import math
+import statistics
 
 import numpy as np
 import pytest
@@ -118,3 +119,26 @@ def test_a_snapshot_carries_its_question_time_through_its_plain_form_and_refuses
     for bad in (math.nan, -1.0, math.inf):
         with pytest.raises(ValueError, match="question_time_s"):
             Snapshot(GOALS, beliefs({}), NEAR_CUP, np.zeros(6), question_time_s=bad)
+
+
+def test_an_evaluation_trial_records_each_question_s_charge_and_answer_and_the_charge_follows_the_answers():
+    """The hesitant user (answers after 0.8-4 s), in trials where it is asked more than once: the first
+    question is charged the prior, every later one what its earlier answers give, and after a slow first
+    answer a later question is charged more (Scene 2's spoon, seed 1405: 2 s, then 3 s)."""
+    from sa_daemon.config import load_config
+    from sa_daemon.control.answer_time import whole_steps
+    from sa_daemon.sim.episode import run_trial
+    from sa_daemon.sim.users import load_user
+
+    cfg = load_user("hesitant").apply(load_config(None))
+    cases = (("scene2", "spoon:top_vertical", 1405), ("scene2", "spoon:top_vertical", 1409),
+             ("study-simple", "cup:top", 1304))
+    asked = [run_trial(load_scene(scene), task, "policy", seed, cfg, user_name="hesitant").asked
+             for scene, task, seed in cases]
+    assert sum(len(a) >= 2 for a in asked) >= 2, "the hesitant user was asked twice in fewer than two trials"
+    for questions in asked:
+        for k, q in enumerate(questions):
+            assert q["answer"] in ("yes", "no") and 0.8 - 1e-6 <= q["answered_after_s"] <= 4.0 + 1.0 / cfg.eval.control_hz
+            earlier = [2.0, *(a["answered_after_s"] for a in questions[:k])]
+            assert q["charged_s"] == pytest.approx(whole_steps(statistics.median(earlier), 1.0))
+    assert any(q["charged_s"] > 2.0 for questions in asked for q in questions)

@@ -113,7 +113,9 @@ def question_record(snap: Snapshot, target: str, t: float) -> dict:
     of the target's object among the objects by probability (1 = the most likely; an object's probability
     is the sum over its grasp types), and the rank of the target itself among the targets (1 = the most
     likely target; ties share the better rank). The two ranks differ where the likeliest target belongs to
-    an object whose probability is spread over fewer grasp types than another's."""
+    an object whose probability is spread over fewer grasp types than another's. ``charged_s``: the
+    question time the planner charged (s, ``Snapshot.question_time_s``: the person's, learned from their
+    earlier answers). The trial adds the answer and ``answered_after_s`` (s) once it is answered."""
     tp = snap.goals.target_probabilities(snap.probs)
     objects: dict[str, float] = {}
     for k, v in tp.items():
@@ -123,7 +125,7 @@ def question_record(snap: Snapshot, target: str, t: float) -> dict:
     p_max = max(tp.values())
     return {"t": round(t, 6), "target": target, "p_max": round(p_max, 6),
             "over_uniform": round(p_max * len(tp), 6), "object_rank": ranked.index(parse_target(target)[0]) + 1,
-            "target_rank": 1 + sum(v > tp[target] for v in tp.values())}
+            "target_rank": 1 + sum(v > tp[target] for v in tp.values()), "charged_s": snap.question_time_s}
 
 
 def desired_pose(goal: Goal, start: Pose, cfg: Config, rng: np.random.Generator, choice: str | None = None,
@@ -217,8 +219,12 @@ def run_trial(
         answered = False
         q = ctl.question
         if q is not None and user.answers_by(q.qid, q.asked_at, t):
-            ctl.on_answer(user.answer(q.target, cfg.asking.third_answer), t)
+            value = user.answer(q.target, cfg.asking.third_answer)
+            ctl.on_answer(value, t)
             answered = True  # re-plan now, with the answer
+            if asked and asked[-1]["target"] == q.target:
+                asked[-1].update(answer=value if value == "other" else ("yes" if value in (True, "yes") else "no"),
+                                 answered_after_s=round(t - q.asked_at, 6))
         if step % plan_every == 0 or answered:
             snap = ctl.snapshot(state.pose, budget_s=None, node_budget=cfg.eval.node_budget)
             if snap is not None:
