@@ -170,6 +170,7 @@ def test_policy_asks_holds_still_and_gets_an_answer(policy):
     ia, a = c.event("answer", timeout_s=30, start=iq, goal=q["goal"])
     assert a["source"] == "sim" and a["value"] == ("yes" if q["goal"] == "cup:top" else "no")
     assert a["after_s"] >= Config().sim_user.answer_delay_s - 0.1
+    assert a["charged_s"] == 0.0  # COMMIT_MODEL_TOML's question_time_s: a prior of 0 is not learned away
     pending = [s for s in c.slice(iq, ia, topic="state") if s["question"] is not None]
     assert all(s["question"] == q["text"] and s["action"] == {"kind": "question", "goal": q["goal"]}
                for s in pending)

@@ -99,7 +99,8 @@ class Asker:
             raise RequestError(str(e)) from None
         self.cleared()
         after_s = now - q.asked_at
-        self._event("answer", goal=q.target, value=value, source=source, after_s=round(after_s, 3), **detail)
+        self._event("answer", goal=q.target, value=value, source=source, after_s=round(after_s, 3),
+                    charged_s=round(self._ctl.answer_time.charged_s, 6), **detail)
 
     def expire(self, now: float) -> None:
         """Drop the pending question after ``runtime.question_timeout_s``."""
