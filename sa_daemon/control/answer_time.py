@@ -46,11 +46,14 @@ class AnswerTime:
         self._step_s = cfg.planner.rollout_step_s
         self._learn = cfg.asking.learn_answer_time
         self._times_s = []
+        self._charged_s = self._prior_s
 
     def record(self, after_s: float) -> None:
         """An answer ``after_s`` seconds after its question was posed (finite, >= 0; else ignored)."""
         if math.isfinite(after_s) and after_s >= 0.0:
             self._times_s.append(float(after_s))
+            if self._learn and self._prior_s > 0.0:
+                self._charged_s = whole_steps(statistics.median([self._prior_s, *self._times_s]), self._step_s)
 
     @property
     def count(self) -> int:
@@ -65,10 +68,9 @@ class AnswerTime:
     @property
     def charged_s(self) -> float:
         """What the planner charges a question now (s): ``reward.question_time_s``, or with
-        ``asking.learn_answer_time`` the module doc's ``T_q``."""
-        if not self._learn or not self._times_s or self._prior_s <= 0.0:
-            return self._prior_s
-        return whole_steps(statistics.median([self._prior_s, *self._times_s]), self._step_s)
+        ``asking.learn_answer_time`` the module doc's ``T_q`` (kept from the last answer: every snapshot
+        reads it)."""
+        return self._charged_s
 
     @property
     def suggested_s(self) -> float | None:
