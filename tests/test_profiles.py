@@ -110,15 +110,15 @@ def test_the_daemon_counts_a_persons_answer_times_and_suggests_what_their_profil
     ctl = Controller(cfg, load_scene("scene1").goals, "policy", 0.01)
     events: list[dict] = []
     asker = Asker(cfg, ctl, lambda kind, **fields: events.append({"type": kind, **fields}))
-    assert asker.answer_times() == {"count": 0, "median_s": None, "charged_s": 2.0, "learning": True,
-                                    "suggested_s": None}
+    assert ctl.answer_time.summary() == {"count": 0, "median_s": None, "charged_s": 2.0, "learning": True,
+                                         "suggested_s": None}
     for target, after in (("cup:top", 2.2), ("bowl:top", 3.4)):
         ctl.ask(target, time.monotonic() - after)
         asker.answer("no", "command")
-    assert asker.answer_times()["count"] == 2 and asker.answer_times()["suggested_s"] is None
+    assert ctl.answer_time.summary()["count"] == 2 and ctl.answer_time.summary()["suggested_s"] is None
     ctl.ask("chips can:side", time.monotonic() - 2.6)
     asker.answer("yes", "command")
-    times = asker.answer_times()
+    times = ctl.answer_time.summary()
     assert times["count"] == 3 and times["median_s"] == pytest.approx(2.6, abs=0.05) and times["suggested_s"] == 3.0
     assert times["charged_s"] == 3.0  # learned: median(2, 2.2, 3.4, 2.6) = 2.4, up to whole steps
     # each answer event says what the planner charges from then on: median(2, 2.2) = 2.1 -> 3,
@@ -126,7 +126,7 @@ def test_the_daemon_counts_a_persons_answer_times_and_suggests_what_their_profil
     assert [e["charged_s"] for e in events if e["type"] == "answer"] == [3.0, 3.0, 3.0]
     ctl.reconfigure(cfg)  # a profile switch, as the daemon makes it (another person)
     asker.reconfigure(cfg)
-    assert asker.answer_times()["count"] == 0
+    assert ctl.answer_time.summary()["count"] == 0
 
 
 # -- the stick ----------------------------------------------------------------------------------------------

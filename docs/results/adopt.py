@@ -136,17 +136,25 @@ def cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
     return out
 
 
+def _time_pairs(new: dict, old: dict):
+    """Each trial of ``new`` with its completion times ``(option's, default's)`` (s) where the default's
+    trial of the same scene, task, method, user and seed exists and both succeeded, else ``None``."""
+    before = {trial_key(t): t for t in old["trials"]}
+    for t in new["trials"]:
+        o = before.get(trial_key(t))
+        both = o is not None and t["success"] and o["success"]
+        yield t, ((t["completion_time_s"], o["completion_time_s"]) if both else None)
+
+
 def paired_cell_changes(new: dict, old: dict) -> dict[str, list[int]]:
     """Rule s32's (c''): per method, ``[faster, slower]``: the (task, user) cells whose mean time over the
     seeds both succeed on moved by more than ``CELL_CHANGE`` of the default's (cells with no such seed are
     not counted)."""
-    before = {trial_key(t): t for t in old["trials"]}
     times: dict[tuple, list[tuple[float, float]]] = {}
-    for t in new["trials"]:
-        o = before.get(trial_key(t))
+    for t, pair in _time_pairs(new, old):
         cell = times.setdefault((t["scene"], t["task"], t["method"], t["user"]), [])
-        if o is not None and t["success"] and o["success"]:
-            cell.append((t["completion_time_s"], o["completion_time_s"]))
+        if pair is not None:
+            cell.append(pair)
     out: dict[str, list[int]] = {}
     for (_, _, method, _), pairs in times.items():
         counts = out.setdefault(method, [0, 0])
@@ -224,9 +232,7 @@ def prediction_flips(new: dict, old: dict) -> dict[tuple[str, str], tuple[int, i
 def paired_times(new: dict, old: dict) -> tuple[list[float], list[float]]:
     """Rule s39's (h): the policy's completion times (s) of the trials both configurations succeed on,
     ``(option's, default's)`` paired by scene, task, user and seed."""
-    before = {trial_key(t): t for t in old["trials"]}
-    pairs = [(t["completion_time_s"], o["completion_time_s"]) for t in new["trials"]
-             if t["method"] == "policy" and (o := before.get(trial_key(t))) is not None and t["success"] and o["success"]]
+    pairs = [pair for t, pair in _time_pairs(new, old) if pair is not None and t["method"] == "policy"]
     return [p[0] for p in pairs], [p[1] for p in pairs]
 
 
@@ -239,8 +245,8 @@ def judge_times(option_s: list[float], default_s: list[float], centre: str = "me
     if mid is not None and mid < 0 and test.p_value is not None and test.p_value < ALPHA:
         return []
     part = "(h)" if centre == "median" else "(h')"
-    line = f"{part} paired time over {test.n_pairs} trials: {centre} difference {_f(mid, 3)} s, p = {_f(test.p_value, 3)}"
-    return [line]
+    return [f"{part} paired time over {test.n_pairs} trials: {centre} difference {_f(mid, 3)} s, "
+            + f"p = {_f(test.p_value, 3)}"]
 
 
 def judge(rows: list[dict], cells: dict[str, list[int]],

@@ -11,7 +11,8 @@ charges the planner
 
 where ``T_0 = reward.question_time_s`` is the prior counted as one answer and ``dt`` the rollout step:
 one slow answer moves the charge halfway (a 4 s answer after the 2 s prior: 3 s), an outlier among
-several does not, and a person who answers within a step of the prior is charged the prior. A prior of
+several does not, and a person who answers within one step below the prior (the simulated users' 1.5 s
+against 2 s) is charged the prior. A prior of
 0 (the commit model's paper reading: a question costs its ``-5`` alone) stays 0. The count goes on
 across tasks and starts again when the settings change (a profile switch: another person). On by
 default since session 39 (``docs/results.md``, "Session 39").
@@ -80,7 +81,11 @@ class AnswerTime:
         return whole_steps(median, self._step_s) if median is not None and self.count >= self.MIN_SUGGEST else None
 
     def summary(self) -> dict[str, float | int | bool | None]:
-        """``status``'s ``answer_times`` (``docs/protocol.md``)."""
+        """``status``'s ``answer_times`` (``docs/protocol.md``): ``count`` answers since the start or the
+        last profile switch, their ``median_s`` (s, from the question to the answer), ``charged_s`` (what the
+        planner charges now), ``learning`` (``asking.learn_answer_time``) and ``suggested_s`` (from three
+        answers on, what a profile would set, ``docs/profiles.md``, "A slow answerer"); ``None`` where there
+        is nothing to say."""
         median, suggested = self.median_s, self.suggested_s
         return {"count": self.count, "median_s": None if median is None else round(median, 3),
                 "charged_s": round(self.charged_s, 6), "learning": self._learn,

@@ -42,6 +42,12 @@ class Question:
     qid: int
 
 
+def answer_word(answer: bool | str) -> str:
+    """An answer as events and records spell it: ``"yes"`` (``True`` or ``"yes"``), ``"other"`` (that
+    object, another grasp), else ``"no"`` (what :meth:`~.controller.Controller.on_answer` reads it as)."""
+    return answer if answer == "other" else ("yes" if answer in (True, "yes") else "no")
+
+
 @dataclass(frozen=True)
 class Tick:
     """One control period's output: the model's blended command, what the safety pipeline made of it

@@ -102,8 +102,9 @@ class Problem:
     def _question_time_cost(self) -> float:
         """Progress a question forgoes (reward units, >= 0): while it is asked and answered
         (``question_time_s``, the snapshot's where it has one) nothing moves, so it costs that share of the
-        lookahead window's gain of the best move over staying put, at the planning-time belief. Constant per snapshot, so the solver's
-        bounds (which need ``r_q`` to be one number) stay valid; 0 with ``question_time_s = 0``."""
+        lookahead window's gain of the best move over staying put, at the planning-time belief. Constant
+        per snapshot, so the solver's bounds (which need ``r_q`` to be one number) stay valid; 0 with
+        ``question_time_s = 0``."""
         t_q = self.snap.question_seconds(self.cfg.reward.question_time_s)
         if t_q <= 0.0 or not self.moves:
             return 0.0

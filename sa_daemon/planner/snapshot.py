@@ -86,7 +86,8 @@ class Snapshot:
             object.__setattr__(self, "pose_log_w", w)
         if self.questions_left is not None and (not isinstance(self.questions_left, int) or self.questions_left < 0):
             raise ValueError("questions_left must be None or an integer >= 0")
-        if self.question_time_s is not None and not (math.isfinite(self.question_time_s) and self.question_time_s >= 0):
+        t_q = self.question_time_s
+        if t_q is not None and not (math.isfinite(t_q) and t_q >= 0):
             raise ValueError("question_time_s must be None or a finite number of seconds >= 0")
 
     def question_seconds(self, default_s: float) -> float:

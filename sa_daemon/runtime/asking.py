@@ -18,7 +18,7 @@ from typing import Any
 
 from ..config import Config
 from ..control.controller import Controller
-from ..control.outputs import NoQuestion, Question
+from ..control.outputs import NoQuestion, Question, answer_word
 from ..io.protocol import RequestError
 from ..speech.speaker import Speaker, Spoken, echo_text, question_text
 
@@ -47,16 +47,6 @@ class Asker:
         self._cfg = cfg
         if self.speaker is not None:
             self.speaker.configure(cfg.speech)
-
-    def answer_times(self) -> dict[str, Any]:
-        """How long this person takes to answer, against what the planner charges a question: ``count``
-        answers since the start or the last profile switch, their ``median_s`` (s, from the question to
-        the answer), ``charged_s`` (what the planner charges now: ``reward.question_time_s``, or the
-        learned time with ``asking.learn_answer_time``, then ``learning`` is true) and, from three
-        answers on, ``suggested_s``: the median rounded up to whole ``planner.rollout_step_s`` steps,
-        what a profile would set (``docs/profiles.md``, "A slow answerer"); ``None`` where there is
-        nothing to say."""
-        return self._ctl.answer_time.summary()
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         """The event loop that speech and voice callbacks are moved onto."""
@@ -90,7 +80,7 @@ class Asker:
         now = time.monotonic()
         if source in ("button", "command", "voice") and source not in self._cfg.asking.answer_sources:
             raise RequestError(f"answers by {source} are off (asking.answer_sources)")
-        value = answer if answer == "other" else ("yes" if answer in (True, "yes") else "no")
+        value = answer_word(answer)
         try:
             q = self._ctl.on_answer(value, now)
         except NoQuestion as e:
@@ -98,8 +88,7 @@ class Asker:
         except ValueError as e:  # the third answer off, or the object has one grasp type only
             raise RequestError(str(e)) from None
         self.cleared()
-        after_s = now - q.asked_at
-        self._event("answer", goal=q.target, value=value, source=source, after_s=round(after_s, 3),
+        self._event("answer", goal=q.target, value=value, source=source, after_s=round(now - q.asked_at, 3),
                     charged_s=round(self._ctl.answer_time.charged_s, 6), **detail)
 
     def expire(self, now: float) -> None:

@@ -199,7 +199,7 @@ class View:
         return s.status() if s is not None else None
 
     def answer_times(self) -> dict[str, Any]:
-        return self._d.asker.answer_times()
+        return self._d.ctl.answer_time.summary()
 
     def voice(self) -> dict[str, Any] | None:
         v = self._d.asker.voice

@@ -25,6 +25,7 @@ from ..arm.kinematic import KinematicArm
 from ..arm.reach import reachable_scene
 from ..config import Config
 from ..control.controller import Controller
+from ..control.outputs import answer_word
 from ..geometry import Pose
 from ..model.actions import Mode
 from ..planner.snapshot import PlanResult, Snapshot
@@ -223,8 +224,7 @@ def run_trial(
             ctl.on_answer(value, t)
             answered = True  # re-plan now, with the answer
             if asked and asked[-1]["target"] == q.target:
-                asked[-1].update(answer=value if value == "other" else ("yes" if value in (True, "yes") else "no"),
-                                 answered_after_s=round(t - q.asked_at, 6))
+                asked[-1].update(answer=answer_word(value), answered_after_s=round(t - q.asked_at, 6))
         if step % plan_every == 0 or answered:
             snap = ctl.snapshot(state.pose, budget_s=None, node_budget=cfg.eval.node_budget)
             if snap is not None:
