@@ -163,7 +163,7 @@ def test_eval_with_a_valid_config_file_uses_it(tmp_path):
 
 @pytest.fixture(scope="module")
 def bench_runs(tmp_path_factory):
-    """Both planner benchmarks, run at the same time (each takes seconds)."""
+    """The planner benchmarks, run at the same time (each takes seconds)."""
     d = tmp_path_factory.mktemp("bench")
     commit = d / "commit.toml"  # the pomdp_py peer plans the commit model
     commit.write_text(COMMIT_MODEL_TOML)
@@ -172,6 +172,8 @@ def bench_runs(tmp_path_factory):
                          "--json", str(d / "no_peer.json")), d / "no_peer.json"),
         "peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "3", "--config", str(commit),
                       "--json", str(d / "peer.json")), d / "peer.json"),
+        "watch_peer": (_cmd("bench", "planner", "--scene", "scene1", "--samples", "3",
+                            "--json", str(d / "watch_peer.json")), d / "watch_peer.json"),
     }
     procs = {
         k: subprocess.Popen(cmd, cwd=d, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -221,6 +223,16 @@ def test_bench_planner_with_peer(bench_runs):
     peer = data["peer_agreement_at_budget"]
     assert isinstance(peer, (int, float)) and 0.0 <= peer <= 1.0
     assert "POUCT" in stdout
+
+
+def test_bench_planner_with_peer_on_the_watch_model(bench_runs):
+    rc, stdout, stderr, path = bench_runs["watch_peer"]
+    assert rc == 0, stderr
+    data = _check_bench_json(path)
+    assert data["samples"] == 3 and data["model"] == "watch" and data["peer"] == "pomdp_py POUCT"
+    peer = data["peer_agreement_at_budget"]
+    assert isinstance(peer, (int, float)) and 0.0 <= peer <= 1.0
+    assert "peer (pomdp_py POUCT) agreement" in stdout
 
 
 def test_bench_planner_unknown_scene_exits_2(tmp_path):

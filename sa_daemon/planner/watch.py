@@ -69,6 +69,7 @@ from ..world.goals import target_object
 from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
+from .watch_tree import NodeKey, WatchTree
 from .watched_beliefs import watched_beliefs
 
 MAX_BATCH = 20_000
@@ -146,6 +147,8 @@ class WatchSearch:
         self.children = 0
         """Distinct children of the watched motions searched (branches turning alike are one child)."""
         self._memo: dict[tuple[int, int], tuple[Rollouts, FloatArray]] = {}
+        self._open: tuple[Rollouts, dict[NodeKey, frozenset[int]]] | None = None
+        """While :meth:`tree` searches: the root's rollouts and the questions each of their nodes may ask."""
 
     # -- pieces ------------------------------------------------------------------------------------------
 
@@ -200,6 +203,7 @@ class WatchSearch:
             if self.gated:  # no decision after the answer: no information worth anything
                 return V, act
             w = self._ask_last(R, c)
+            self._note_open(R, steps, asked, yes, avail)
             eq = np.einsum("ng,ng->n", B, w)
             q = avail.argmax(axis=1)
             better = avail.any(axis=1) & (eq > best)
@@ -207,12 +211,21 @@ class WatchSearch:
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         if self.gated:  # a closed question is -inf throughout (0 x -inf would be nan in the product)
             avail = avail & np.isfinite(Vq[..., 0])
+        self._note_open(R, steps, asked, yes, avail)
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
         better = eq[rows, q] > best
         V = np.where(better[:, None], Vq[rows, q], V)
         act = np.where(better, len(self.moves) + q, act)
         return V, act
+
+    def _note_open(self, R: Rollouts, steps: int, asked: np.ndarray, yes: np.ndarray, avail: np.ndarray) -> None:
+        """While :meth:`tree` searches: note the questions each node of the root's question tree may ask."""
+        if self._open is None or self._open[0] is not R:
+            return
+        for a, y, o in zip(asked, yes, avail, strict=True):
+            key = (steps, frozenset(np.flatnonzero(a).tolist()), frozenset(np.flatnonzero(y).tolist()))
+            self._open[1][key] = frozenset(np.flatnonzero(o).tolist())
 
     def _commits(self, R: Rollouts, steps: int) -> FloatArray:
         """``value[..., steps]`` of ``R`` as a contiguous ``(C, G, A)`` array, kept for reuse."""
@@ -323,32 +336,35 @@ class WatchSearch:
         (:meth:`start_children`). In branch ``g`` the tracker decides by its belief ``b'_gw`` and the
         outcome is counted for goal ``g``: a watch that would mislead the tracker is worth what the misled
         choice earns."""
-        g, ws = self.branches, self.watched
+        return {self.moves[w]: value for w, (_, _, value) in self._watch_returns(R, kids, asked).items()}
+
+    def _watch_returns(self, R: Rollouts, kids: _Children,
+                       asked: np.ndarray) -> dict[int, tuple[np.ndarray, FloatArray, float]]:
+        """Per watched motion ``w``: the goals its value is averaged over, what it returns for each of them,
+        and that average. ``watch_branches`` "top" and "all": the branches, each its own child, by the
+        branch weights. "mapped": every goal ``h`` the root belief holds, as commits and questions are; a
+        branch is its own child, any other goal is read through the child of the branch ``g`` its predicted
+        input is likeliest for (``argmax_g loglik[h, w, g]``) and credited with what that child's choice
+        earns for ``h``."""
         kids.rollouts.join()
         n = len(kids.beliefs)
         A = np.repeat(asked, n, axis=0)
         V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w)
+        g, ws = self.branches, self.watched
+        kid = kids.of_branch.reshape(len(ws), len(g))  # each (motion, branch)'s child, rows of V
+        out = {}
         if self.cfg.planner.watch_branches == "mapped":
-            return self._mapped_values(R, V, kids.of_branch.reshape(len(ws), len(g)))
-        v = V[kids.of_branch, np.tile(g, len(ws))].reshape(len(ws), len(g))  # each branch's own goal
-        p = self.branch_weights
-        return {self.moves[w]: float(p @ (R.watch_return[0, g, w] + v[i])) for i, w in enumerate(ws)}
-
-    def _mapped_values(self, R: Rollouts, V: FloatArray, kid: np.ndarray) -> dict[Action, float]:
-        """``planner.watch_branches = "mapped"``: ``watch(w)`` averaged over every goal ``h`` the root belief
-        holds, as commits and questions are. A branch is its own child; any other goal is read through the
-        child of the branch ``g`` its predicted input is likeliest for (``argmax_g loglik[h, w, g]``), and
-        credited with the return that child's choice earns for ``h``. ``kid`` ``(W, branches)``: each
-        (motion, branch)'s child, rows of ``V``."""
-        g = self.branches
-        h = np.flatnonzero(self.b0 > 0)
-        slot = np.full(len(self.b0), -1)
-        slot[g] = np.arange(len(g))
-        out: dict[Action, float] = {}
-        for i, w in enumerate(self.watched):
-            rep = np.where(slot[h] >= 0, slot[h], R.loglik[0][h, w][:, g].argmax(axis=1))
-            value = R.watch_return[0, h, w] + V[kid[i, rep], h]
-            out[self.moves[w]] = float(self.b0[h] @ value / self.b0[h].sum())
+            h = np.flatnonzero(self.b0 > 0)
+            slot = np.full(len(self.b0), -1)
+            slot[g] = np.arange(len(g))
+            for i, w in enumerate(ws):
+                rep = np.where(slot[h] >= 0, slot[h], R.loglik[0][h, w][:, g].argmax(axis=1))
+                ret = R.watch_return[0, h, w] + V[kid[i, rep], h]
+                out[w] = (h, ret, float(self.b0[h] @ ret / self.b0[h].sum()))
+            return out
+        for i, w in enumerate(ws):
+            ret = R.watch_return[0, g, w] + V[kid[i], g]  # each branch's own goal
+            out[w] = (g, ret, float(self.branch_weights @ ret))
         return out
 
     # -- search ------------------------------------------------------------------------------------------
@@ -372,6 +388,47 @@ class WatchSearch:
             kids.rollouts.cancel()
             return values, {}, False
         return values, self.watch_values(R, kids, asked), True
+
+
+    def tree(self) -> WatchTree:
+        """This snapshot's problem as plain data (:class:`~.watch_tree.WatchTree`), searched without a
+        deadline: the commits' returns, the questions' costs and likelihoods, the questions every node of
+        the root's question tree may ask, and each watched motion's payoff per goal. Not for the
+        ``asking.third_answer`` model (its "other" answer is not a Bayes update) nor ``planner.root_goals =
+        "top"`` (the root averages by another belief than its answers update)."""
+        if self.third:
+            raise ValueError("asking.third_answer: the watch tree holds yes/no questions only")
+        if self.cfg.planner.root_goals != "all":
+            raise ValueError('planner.root_goals: the watch tree needs "all" (one belief for the root and its answers)')
+        R = self.root_rollouts()
+        asked = np.zeros((1, len(self.questions)), dtype=bool)
+        kids = self.start_children(R) if self.watched else None
+        self._open = (R, {})
+        try:
+            root = frozenset(self._root_questions(R, asked))
+        finally:
+            _, opened = self._open
+            self._open = None
+        opened[(self.n, frozenset(), frozenset())] = root
+        watches = self._watch_vectors(R, kids, asked) if kids is not None else {}
+        frozen = [np.array(x) for x in (self.b_root, R.value[0], self.cfg.reward.question + self.n_q * R.stay[0],
+                                         self._ask_last(R, np.zeros(1, dtype=int))[0], self.L_yes)]
+        for x in (*frozen, *watches.values()):
+            x.setflags(write=False)
+        b, value, cost, last, L_yes = frozen
+        return WatchTree(tuple(self.moves), tuple(self.questions), b, value, cost, last, L_yes, self.n, self.n_q,
+                         opened, watches)
+
+    def _watch_vectors(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[int, FloatArray]:
+        """Each watched motion's payoff per goal, ``(G,)``, whose average by the root belief is its value:
+        its return for the goals it is averaged over; for any other goal the value itself ("top", "all") or
+        0 ("mapped": the belief holds none of them)."""
+        out = {}
+        for w, (h, ret, value) in self._watch_returns(R, kids, asked).items():
+            vec = np.full(len(self.b0), value if self.cfg.planner.watch_branches != "mapped" else 0.0)
+            vec[h] = ret
+            out[w] = vec
+        return out
 
 
 def plan_watch(model: SharedAutonomyModel, snap: Snapshot) -> PlanResult:
