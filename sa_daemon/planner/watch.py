@@ -80,6 +80,13 @@ GATHER_RATIO, MAX_GATHER = 4, 4_000_000
 per start pose."""
 
 
+def _frozen(x: FloatArray) -> FloatArray:
+    """A read-only copy of ``x``."""
+    out = np.array(x)
+    out.setflags(write=False)
+    return out
+
+
 @dataclass(frozen=True)
 class _Children:
     """The distinct children of the watched motions: their rollouts (maybe still running), beliefs
@@ -389,7 +396,6 @@ class WatchSearch:
             return values, {}, False
         return values, self.watch_values(R, kids, asked), True
 
-
     def tree(self) -> WatchTree:
         """This snapshot's problem as plain data (:class:`~.watch_tree.WatchTree`), searched without a
         deadline: the commits' returns, the questions' costs and likelihoods, the questions every node of
@@ -411,13 +417,12 @@ class WatchSearch:
             self._open = None
         opened[(self.n, frozenset(), frozenset())] = root
         watches = self._watch_vectors(R, kids, asked) if kids is not None else {}
-        frozen = [np.array(x) for x in (self.b_root, R.value[0], self.cfg.reward.question + self.n_q * R.stay[0],
-                                         self._ask_last(R, np.zeros(1, dtype=int))[0], self.L_yes)]
-        for x in (*frozen, *watches.values()):
-            x.setflags(write=False)
-        b, value, cost, last, L_yes = frozen
-        return WatchTree(tuple(self.moves), tuple(self.questions), b, value, cost, last, L_yes, self.n, self.n_q,
-                         opened, watches)
+        return WatchTree(
+            moves=tuple(self.moves), questions=tuple(self.questions), b=_frozen(self.b_root), value=_frozen(R.value[0]),
+            question_cost=_frozen(self.cfg.reward.question + self.n_q * R.stay[0]),
+            last_question=_frozen(self._ask_last(R, np.zeros(1, dtype=int))[0]), L_yes=_frozen(self.L_yes),
+            n=self.n, n_q=self.n_q, open=opened, watches={w: _frozen(v) for w, v in watches.items()},
+        )
 
     def _watch_vectors(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[int, FloatArray]:
         """Each watched motion's payoff per goal, ``(G,)``, whose average by the root belief is its value:
