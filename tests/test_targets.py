@@ -132,3 +132,30 @@ def test_the_recorded_suite_files_are_read_end_to_end():
     assert _verdict([r for r in rows if r.target.startswith("questions")], "scene1 `chips can:side`") is False
     assert _verdict([r for r in rows if r.target.startswith("correct")], "scene2 `drill:side_vertical`") is False
     assert _verdict([r for r in rows if r.target.startswith("questions")], "scene1 `cup:top`") is True
+
+
+def _bench(**kw) -> dict:
+    data = {"scene": "study-complex", "goals": 22, "model": "watch", "solve_ms_p50": 7.1, "solve_ms_p99": 10.9,
+            "agreement_at_budget": 1.0, "peer_agreement_at_budget": 0.555}
+    return {**data, **kw}
+
+
+@pytest.mark.parametrize(("change", "met"), [
+    ({}, True),
+    ({"solve_ms_p50": 10.5}, False),
+    ({"solve_ms_p99": 120.0}, False),
+    ({"agreement_at_budget": 0.98, "peer_agreement_at_budget": 0.5}, False),
+    ({"agreement_at_budget": 0.995, "peer_agreement_at_budget": 0.995}, False),  # not above the peer
+    ({"peer_agreement_at_budget": None}, False),  # no peer run
+    ({"model": "commit"}, False),  # not the new model
+])
+def test_the_planner_bench_target_turns_on_each_of_its_figures(change, met):
+    row = targets.planner_bench(_bench(**change))
+    assert row.met is met
+    assert row.where == "study-complex (22 goals, bench)"
+
+
+def test_the_recorded_bench_files_meet_the_planner_target():
+    for scene in ("scene1", "scene2", "study-complex"):
+        data = json.loads((SCRIPT.parent / f"bench_planner_{scene}_peer.json").read_text())
+        assert targets.planner_bench(data).met is True, scene

@@ -2,7 +2,8 @@
 
     python docs/results/targets.py FILE [FILE ...]
 
-``FILE`` are ``sa-daemon eval --json`` files (suites or plain runs). Their trials are pooled, a trial being
+``FILE`` are ``sa-daemon eval --json`` files (suites or plain runs) and ``sa-daemon bench planner --json``
+files, told apart by their content. The evaluations' trials are pooled, a trial being
 one (scene, task, user, method, seed); a trial recorded in two files (Table I's ``cup:top`` is also Fig. 7's
 first task) is taken once, from the first file, and two records of it that disagree are an error, since
 then the files come from different models. Paired tests are recomputed on the pooled trials with the
@@ -22,7 +23,10 @@ The targets (issue 16, "Targets"; the policy's trials unless named):
 * the policy beating HO on completion time and joystick input for every user on Table I and the simple
   study, "Holm-corrected p < 0.05 where the paper found it" (below); never significantly slower than
   manual; ``cup:side`` succeeding in at least 4 of 5 trials for every user; correct prediction at least 0.9
-  on every task.
+  on every task;
+* ``bench planner`` on the new model: solve p50 <= 10 ms, p99 <= 100 ms, agreement at the 0.1 s budget
+  >= 0.99 and above the pomdp_py POUCT peer planning the same model (a ``bench planner --json`` file among
+  the arguments; the issue's "22 actions" is the 22-goal scene's).
 
 "Where the paper found it": the paper's simple study found the policy significantly better than HO on the
 cup (its Task 3: time p = 0.019, joystick input p = 0.003, section VI-D.1) and nowhere else; Table I is one
@@ -203,6 +207,19 @@ def prediction(trials: list[dict]) -> list[Row]:
     return rows
 
 
+def planner_bench(bench: dict) -> Row:
+    """``bench planner`` on the new model (``planner.model = "watch"``): solve p50 <= 10 ms and p99 <= 100 ms,
+    agreement with the optimum at the budget >= 0.99 and above pomdp_py's POUCT planning the same model."""
+    peer = bench.get("peer_agreement_at_budget")
+    agree = bench["agreement_at_budget"]
+    measured = (f"{bench.get('model', '?')} model: p50 {bench['solve_ms_p50']:.2f} ms, p99 {bench['solve_ms_p99']:.2f} ms, "
+                f"agreement {agree:.3f}, POUCT " + ("not run" if peer is None else f"{peer:.3f}"))
+    met = (bench.get("model") == "watch" and bench["solve_ms_p50"] <= 10.0 and bench["solve_ms_p99"] <= 100.0
+           and agree >= 0.99 and peer is not None and agree > peer)
+    return Row("bench planner: p50 <= 10 ms, p99 <= 100 ms, agreement >= 0.99 and above the peer",
+               f"{bench['scene']} ({bench['goals']} goals, bench)", measured, met)
+
+
 def report(trials: list[dict]) -> list[Row]:
     """Every target's rows, in the issue's order."""
     comparisons = compare(trials, POLICY)
@@ -268,8 +285,10 @@ def ratios_by_user(trials: list[dict], baseline: str) -> str:
 if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
-    pooled = load_trials(Path(p) for p in sys.argv[1:])
-    print(markdown(report(pooled)))
+    data = {Path(p): json.loads(Path(p).read_text()) for p in sys.argv[1:]}
+    benches = [d for d in data.values() if "solve_ms_p50" in d]  # bench planner --json files
+    pooled = load_trials(p for p, d in data.items() if "trials" in d)
+    print(markdown(report(pooled) + [planner_bench(b) for b in benches]))
     for table in (questions_by_user(pooled), ratios_by_user(pooled, "ho"), ratios_by_user(pooled, "manual")):
         if table:
             print("\n" + table)
