@@ -19,6 +19,7 @@ from sa_daemon.planner.watch_tree import exact_values
 from sa_daemon.world.scene import load_scene
 
 SCENE1 = load_scene("scene1")
+SCENE2 = load_scene("scene2")
 COMPLEX = load_scene("study-complex")
 
 
@@ -69,12 +70,26 @@ def test_the_tree_solved_by_recursion_gives_every_root_action_the_search_s_value
     assert asked_any  # the question trees were exercised, not only the commits
 
 
-def test_the_tree_holds_the_22_goal_scene():
+@pytest.mark.parametrize("scene", [SCENE2, COMPLEX], ids=["scene2", "22 goals"])
+def test_the_tree_holds_the_larger_scenes(scene):
     model = _model()
-    for snap in _snapshots(COMPLEX, 3, seed=7):
+    for snap in _snapshots(scene, 3, seed=7):
         ref = plan_watch(model, snap).root_values
         got = exact_values(WatchSearch(model, snap).tree())
         assert got == pytest.approx(ref, rel=1e-9, abs=1e-6)
+
+
+def test_the_tree_lists_only_its_own_nodes():
+    """The gate decides "without asking" at fewer steps than a node's answers leave: those are not nodes of
+    the tree and are not listed (one-second questions: chains deep enough to have many of them)."""
+    model = _model(reward={"question_time_s": 1.0})
+    listed = 0
+    for snap in _snapshots(SCENE1, 3, seed=4):
+        tree = WatchSearch(model, snap).tree()
+        for steps, asked, yes in tree.askable:
+            assert steps == tree.n - len(asked) * tree.n_q and yes <= asked
+        listed += len(tree.askable)
+    assert listed > 3
 
 
 def test_a_watch_pays_on_average_what_the_search_values_it():
@@ -144,6 +159,15 @@ def test_pouct_planning_the_tree_finds_the_optimum_with_enough_simulations():
         chose_watch += action in {tree.moves[w] for w in tree.watches}
     assert found >= len(snaps) - 1
     assert chose_watch  # watched motions are among the peer's actions
+
+
+def test_pouct_needs_a_budget_or_a_number_of_simulations():
+    pytest.importorskip("pomdp_py", reason="the pomdp_py peer needs the bench extra: pip install -e '.[bench]'")
+    from sa_daemon.bench.peer import pouct_plan_watch
+
+    tree = WatchSearch(_model(), _snapshots(SCENE1, 1, seed=5)[0]).tree()
+    with pytest.raises(ValueError, match="budget_s"):
+        pouct_plan_watch(tree, None)
 
 
 def test_pouct_is_deterministic_for_a_seed_and_a_number_of_simulations():

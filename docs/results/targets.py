@@ -286,6 +286,9 @@ if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     data = {Path(p): json.loads(Path(p).read_text()) for p in sys.argv[1:]}
+    unknown = [str(p) for p, d in data.items() if "trials" not in d and "solve_ms_p50" not in d]
+    if unknown:
+        sys.exit(f"neither an eval nor a bench planner --json file: {', '.join(unknown)}")
     benches = [d for d in data.values() if "solve_ms_p50" in d]  # bench planner --json files
     pooled = load_trials(p for p, d in data.items() if "trials" in d)
     print(markdown(report(pooled) + [planner_bench(b) for b in benches]))

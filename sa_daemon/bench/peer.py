@@ -8,24 +8,23 @@ The payoffs are our model's own numbers, so the peer plans exactly the problem o
 * the commit model (:class:`~sa_daemon.planner.problem.Problem`): a move pays ``M[g, a]``, a question
   ``r_q``, discounted by ``gamma``;
 * the watch model (:class:`~sa_daemon.planner.watch_tree.WatchTree`): a commit pays its return over the
-  steps left after the questions asked, a question its cost (the last one that fits the horizon its
-  payoff, and ends the episode), a watch of a motion (root only) its payoff for the goal; a node asks
-  only what the tree lets it (the gate, the depth limits); undiscounted. The peer's choice of a watch is
-  the watched motion.
+  steps left after the questions asked; a question pays ``question_cost``, and one asked with exactly
+  ``n_q`` steps left pays ``last_question`` and ends the episode; a watch of a motion (root only) pays its
+  payoff for the goal; a node asks only what the tree lets it (the gate, the depth limits);
+  undiscounted. The peer's choice of a watch is the watched motion.
 """
 
 from __future__ import annotations
 
 import random
+from abc import ABC, abstractmethod
 
 import numpy as np
 import pomdp_py
 
 from ..model.actions import Action
 from ..planner.problem import Problem
-from ..planner.watch_tree import WatchTree
-
-Answers = frozenset[tuple[int, bool]]
+from ..planner.watch_tree import Answers, WatchTree
 
 
 class _State(pomdp_py.State):
@@ -66,7 +65,7 @@ class _Obs(pomdp_py.Observation):
         return isinstance(other, _Obs) and self.value == other.value
 
 
-class _Game:
+class _Game(ABC):
     """The actions, payoffs and answer likelihoods of one problem (module doc)."""
 
     def __init__(self, b0: np.ndarray, moves: tuple[Action, ...] | list[Action],
@@ -77,11 +76,13 @@ class _Game:
         acts += [("watch", w, moves[w]) for w in watched]
         self.actions = [_Action(uid, kind, i, a) for uid, (kind, i, a) in enumerate(acts)]
 
+    @abstractmethod
     def legal(self, answers: Answers) -> list[_Action]:
-        raise NotImplementedError
+        """The actions the node reached by ``answers`` offers."""
 
+    @abstractmethod
     def payoff(self, goal: int, answers: Answers, a: _Action) -> float:
-        raise NotImplementedError
+        """What ``a`` taken after ``answers`` pays if the goal is ``goal``."""
 
     def ends(self, answers: Answers, a: _Action) -> bool:
         """Whether ``a`` taken after ``answers`` ends the episode."""
@@ -200,6 +201,8 @@ def pouct_plan_watch(tree: WatchTree, budget_s: float | None, exploration_const:
     ``exploration_const`` (``None``): the spread of the root's commit values, the scale on which its
     actions differ (returns over the horizon span thousands of units from snapshot to snapshot).
     """
+    if budget_s is None and sims is None:
+        raise ValueError("pouct_plan_watch: give a budget_s (s) or a number of sims")
     if exploration_const is None:
         commits = tree.b @ tree.value[:, :, tree.n]
         exploration_const = max(float(commits.max() - commits.min()), 1.0)

@@ -91,7 +91,7 @@ def run_planner_bench(
             agree += values[timed.action] >= full.value - 1e-9
         if peer:
             if cfg.planner.model == "watch":
-                tree = WatchSearch(model, dataclasses.replace(snap, budget_s=None, node_budget=None)).tree()
+                tree = WatchSearch(model, snap).tree()  # exhaustive: tree() runs to the end
                 act = pouct_plan_watch(tree, budget_s, seed=i)
             else:
                 act = pouct_plan(Problem(model, snap), budget_s, seed=i)

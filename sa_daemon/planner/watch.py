@@ -69,7 +69,7 @@ from ..world.goals import target_object
 from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
-from .watch_tree import NodeKey, WatchTree
+from .watch_tree import NodeKey, WatchTree, node_key
 from .watched_beliefs import watched_beliefs
 
 MAX_BATCH = 20_000
@@ -227,12 +227,15 @@ class WatchSearch:
         return V, act
 
     def _note_open(self, R: Rollouts, steps: int, asked: np.ndarray, yes: np.ndarray, avail: np.ndarray) -> None:
-        """While :meth:`tree` searches: note the questions each node of the root's question tree may ask."""
+        """While :meth:`tree` searches: note the questions each node of the root's question tree may ask. The
+        gate's "decide without asking" nodes (fewer steps left than their answers leave) are not nodes of
+        the tree and are not noted."""
         if self._open is None or self._open[0] is not R:
             return
         for a, y, o in zip(asked, yes, avail, strict=True):
-            key = (steps, frozenset(np.flatnonzero(a).tolist()), frozenset(np.flatnonzero(y).tolist()))
-            self._open[1][key] = frozenset(np.flatnonzero(o).tolist())
+            if steps == self.n - int(a.sum()) * self.n_q:
+                key = node_key(steps, np.flatnonzero(a).tolist(), np.flatnonzero(y).tolist())
+                self._open[1][key] = frozenset(np.flatnonzero(o).tolist())
 
     def _commits(self, R: Rollouts, steps: int) -> FloatArray:
         """``value[..., steps]`` of ``R`` as a contiguous ``(C, G, A)`` array, kept for reuse."""
@@ -415,13 +418,13 @@ class WatchSearch:
         finally:
             _, opened = self._open
             self._open = None
-        opened[(self.n, frozenset(), frozenset())] = root
+        opened[node_key(self.n, (), ())] = root
         watches = self._watch_vectors(R, kids, asked) if kids is not None else {}
         return WatchTree(
             moves=tuple(self.moves), questions=tuple(self.questions), b=_frozen(self.b_root), value=_frozen(R.value[0]),
             question_cost=_frozen(self.cfg.reward.question + self.n_q * R.stay[0]),
             last_question=_frozen(self._ask_last(R, np.zeros(1, dtype=int))[0]), L_yes=_frozen(self.L_yes),
-            n=self.n, n_q=self.n_q, open=opened, watches={w: _frozen(v) for w, v in watches.items()},
+            n=self.n, n_q=self.n_q, askable=opened, watches={w: _frozen(v) for w, v in watches.items()},
         )
 
     def _watch_vectors(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[int, FloatArray]:
