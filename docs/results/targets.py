@@ -68,9 +68,14 @@ class Row:
 
 def load_trials(paths: Iterable[Path]) -> list[dict]:
     """The trials of every file, each (scene, task, user, method, seed) once (module doc)."""
+    return pool_trials((Path(path), json.loads(Path(path).read_text())) for path in paths)
+
+
+def pool_trials(files: Iterable[tuple[Path, dict]]) -> list[dict]:
+    """:func:`load_trials` on files already read: (path, its JSON) pairs."""
     seen: dict[tuple, dict] = {}
-    for path in paths:
-        for t in json.loads(Path(path).read_text())["trials"]:
+    for path, data in files:
+        for t in data["trials"]:
             key = trial_key(t)
             old = seen.setdefault(key, t)
             if old is not t and (old["completion_time_s"], old["questions"]) != (t["completion_time_s"], t["questions"]):
@@ -290,7 +295,7 @@ if __name__ == "__main__":
     if unknown:
         sys.exit(f"neither an eval nor a bench planner --json file: {', '.join(unknown)}")
     benches = [d for d in data.values() if "solve_ms_p50" in d]  # bench planner --json files
-    pooled = load_trials(p for p, d in data.items() if "trials" in d)
+    pooled = pool_trials((p, d) for p, d in data.items() if "trials" in d)
     print(markdown(report(pooled) + [planner_bench(b) for b in benches]))
     for table in (questions_by_user(pooled), ratios_by_user(pooled, "ho"), ratios_by_user(pooled, "manual")):
         if table:

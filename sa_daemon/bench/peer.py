@@ -106,7 +106,7 @@ class _CommitGame(_Game):
 class _WatchGame(_Game):
     def __init__(self, tree: WatchTree) -> None:
         super().__init__(tree.b, tree.moves, tree.questions, sorted(tree.watches), tree.L_yes, 1.0,
-                         max(1, tree.n // tree.n_q + 1))
+                         tree.n // tree.n_q + 1)  # questions that fit the horizon, then the last action
         self.t = tree
 
     def legal(self, answers: Answers) -> list[_Action]:

@@ -154,7 +154,7 @@ class WatchSearch:
         self.children = 0
         """Distinct children of the watched motions searched (branches turning alike are one child)."""
         self._memo: dict[tuple[int, int], tuple[Rollouts, FloatArray]] = {}
-        self._open: tuple[Rollouts, dict[NodeKey, frozenset[int]]] | None = None
+        self._askable: tuple[Rollouts, dict[NodeKey, frozenset[int]]] | None = None
         """While :meth:`tree` searches: the root's rollouts and the questions each of their nodes may ask."""
 
     # -- pieces ------------------------------------------------------------------------------------------
@@ -210,7 +210,7 @@ class WatchSearch:
             if self.gated:  # no decision after the answer: no information worth anything
                 return V, act
             w = self._ask_last(R, c)
-            self._note_open(R, steps, asked, yes, avail)
+            self._note_askable(R, steps, asked, yes, avail)
             eq = np.einsum("ng,ng->n", B, w)
             q = avail.argmax(axis=1)
             better = avail.any(axis=1) & (eq > best)
@@ -218,7 +218,7 @@ class WatchSearch:
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         if self.gated:  # a closed question is -inf throughout (0 x -inf would be nan in the product)
             avail = avail & np.isfinite(Vq[..., 0])
-        self._note_open(R, steps, asked, yes, avail)
+        self._note_askable(R, steps, asked, yes, avail)
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
         better = eq[rows, q] > best
@@ -226,16 +226,16 @@ class WatchSearch:
         act = np.where(better, len(self.moves) + q, act)
         return V, act
 
-    def _note_open(self, R: Rollouts, steps: int, asked: np.ndarray, yes: np.ndarray, avail: np.ndarray) -> None:
+    def _note_askable(self, R: Rollouts, steps: int, asked: np.ndarray, yes: np.ndarray, avail: np.ndarray) -> None:
         """While :meth:`tree` searches: note the questions each node of the root's question tree may ask. The
         gate's "decide without asking" nodes (fewer steps left than their answers leave) are not nodes of
         the tree and are not noted."""
-        if self._open is None or self._open[0] is not R:
+        if self._askable is None or self._askable[0] is not R:
             return
         for a, y, o in zip(asked, yes, avail, strict=True):
             if steps == self.n - int(a.sum()) * self.n_q:
                 key = node_key(steps, np.flatnonzero(a).tolist(), np.flatnonzero(y).tolist())
-                self._open[1][key] = frozenset(np.flatnonzero(o).tolist())
+                self._askable[1][key] = frozenset(np.flatnonzero(o).tolist())
 
     def _commits(self, R: Rollouts, steps: int) -> FloatArray:
         """``value[..., steps]`` of ``R`` as a contiguous ``(C, G, A)`` array, kept for reuse."""
@@ -412,19 +412,19 @@ class WatchSearch:
         R = self.root_rollouts()
         asked = np.zeros((1, len(self.questions)), dtype=bool)
         kids = self.start_children(R) if self.watched else None
-        self._open = (R, {})
+        self._askable = (R, {})
         try:
             root = frozenset(self._root_questions(R, asked))
         finally:
-            _, opened = self._open
-            self._open = None
-        opened[node_key(self.n, (), ())] = root
+            _, askable = self._askable
+            self._askable = None
+        askable[node_key(self.n, (), ())] = root
         watches = self._watch_vectors(R, kids, asked) if kids is not None else {}
         return WatchTree(
             moves=tuple(self.moves), questions=tuple(self.questions), b=_frozen(self.b_root), value=_frozen(R.value[0]),
             question_cost=_frozen(self.cfg.reward.question + self.n_q * R.stay[0]),
             last_question=_frozen(self._ask_last(R, np.zeros(1, dtype=int))[0]), L_yes=_frozen(self.L_yes),
-            n=self.n, n_q=self.n_q, askable=opened, watches={w: _frozen(v) for w, v in watches.items()},
+            n=self.n, n_q=self.n_q, askable=askable, watches={w: _frozen(v) for w, v in watches.items()},
         )
 
     def _watch_vectors(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[int, FloatArray]:
