@@ -83,11 +83,13 @@ def run_planner_bench(
         complete += full.complete
         questions += full.is_question
         timed = solver.plan(dataclasses.replace(snap, budget_s=budget_s, node_budget=None))
-        values = None
+        # every root action's exact value: the watch model's unbudgeted plan holds them, the commit model's
+        # bounds may have pruned some, so it asks the solver (untimed either way)
+        values = full.root_values if cfg.planner.model == "watch" else None
         if timed.action == full.action or timed.value >= full.value - 1e-9:
             agree += 1
         else:
-            values = solver.action_values(snap)
+            values = values or solver.action_values(snap)
             agree += values[timed.action] >= full.value - 1e-9
         if peer:
             if cfg.planner.model == "watch":
