@@ -236,7 +236,12 @@ class PlannerConfig(_Section):
         "included (model.reward.approach_return; docs/model.md)",
     )
     watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
-    watch_levels: int = Field(1, ge=0, le=1, description="watch model: 1 = a motion may be watched before deciding; 0 = no")
+    watch_levels: int = Field(
+        1, ge=0, le=2,
+        description="watch model: 1 = a motion may be watched before deciding; 2 = and, once watched, watched "
+        "once more before deciding (the watch continued: each child may keep its motion for watch_s; session 41, "
+        "docs/model.md; needs watch_branches top or all); 0 = no watching",
+    )
     watch_moves: int = Field(
         3, ge=0, le=64, description="watch model: moves to this many most likely goals may be watched (HO, no-assist always)"
     )
@@ -315,6 +320,13 @@ class PlannerConfig(_Section):
         "(the stick held as far as in the other mode: v_other / scale_other x scale_this, input.*_scale_*; "
         "session 35, docs/model.md; the default since session 37)",
     )
+
+    @model_validator(mode="after")
+    def _continued_watch(self) -> PlannerConfig:
+        if self.watch_levels > 1 and self.watch_branches == "mapped":
+            raise ValueError('watch_levels = 2 needs watch_branches "top" or "all" (a continued watch branches '
+                             'over its own goals)')
+        return self
 
 
 class InputConfig(_Section):

@@ -45,8 +45,8 @@ def test_a_continued_watch_reaches_the_two_step_watch_pose(snaps):
         g, ws = s.branches, s.watched
         pos = np.concatenate([R.watch_positions[0, g, w] for w in ws])
         quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
-        kids = s._rollouts(pos, quat, s.child_beliefs(R, ws), s.n - s.n_w, s.n_w)
-        two = s._rollouts(snap.pose.position[None], snap.pose.quat_wxyz[None], s.b0[None], s.n, 2 * s.n_w)
+        kids = s.rollouts(pos, quat, s.child_beliefs(R, ws), s.n - s.n_w, s.n_w)
+        two = s.rollouts(snap.pose.position[None], snap.pose.quat_wxyz[None], s.b0[None], s.n, 2 * s.n_w)
         for i, w in enumerate(ws):
             if s.moves[w].kind is ActionKind.HO:
                 continue

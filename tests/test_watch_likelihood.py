@@ -100,7 +100,7 @@ def test_copies_of_one_target_part_less_as_the_tracker_reads_them():
     def parting(cfg) -> float:
         ws = WatchSearch(SharedAutonomyModel(cfg), snap)
         pose = snap.pose
-        R = ws._rollouts(pose.position[None], pose.quat_wxyz[None], ws.b0[None], ws.n, ws.n_w)
+        R = ws.rollouts(pose.position[None], pose.quat_wxyz[None], ws.b0[None], ws.n, ws.n_w)
         a = ws.moves.index(NO_ASSIST)
         ll = R.loglik[0, 0, a]  # the user heads to copy #0, the arm leaves the input alone
         return float(ll[0] - ll[1])  # log-likelihood ratio of #0 over #1
@@ -121,7 +121,7 @@ def test_the_watch_expects_the_belief_the_tracker_will_reach(mode):
     snap = Snapshot(goals, probs, pose, np.zeros(6), mode=mode, budget_s=None, node_budget=400, user_speed=speed)
     ws = WatchSearch(SharedAutonomyModel(MARGINAL), snap)
     assert ws.n_w == 1
-    R = ws._rollouts(pose.position[None], pose.quat_wxyz[None], ws.b0[None], ws.n, ws.n_w)
+    R = ws.rollouts(pose.position[None], pose.quat_wxyz[None], ws.b0[None], ws.n, ws.n_w)
     samples = MARGINAL.runtime.belief_hz * ws.dt
     assert samples == int(samples)
     moved = 0.0

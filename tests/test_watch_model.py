@@ -134,7 +134,7 @@ def test_watching_a_user_heading_to_a_goal_moves_the_branch_belief_toward_that_g
     model = SharedAutonomyModel(_cfg())
     s = WatchSearch(model, _snap(speed=(0.05, 0.0)))
     pose = s.snap.pose
-    R = s._rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
+    R = s.rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
     for w in s.watched:
         B = s.child_beliefs(R, [w])
         assert np.allclose(B.sum(axis=1), 1.0)
@@ -228,12 +228,14 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         return Rollouts(cfg, position[None], quat[None], weights[None], s.kp, s.kq, s.moves, snap.mode,
                         snap.user_speed, steps, s.dt, watch_steps, poses=s.poses)
 
-    def decide(R, b, asked: frozenset, steps: int, depth: int) -> np.ndarray:
+    def decide(R, b, asked: frozenset, steps: int, depth: int, cont=None) -> np.ndarray:
         best_e, best_v = -np.inf, None
         for a in range(len(s.moves)):
             v = R.value[0, :, a, steps]
             if b @ v > best_e:
                 best_e, best_v = float(b @ v), v
+        if cont is not None and cont[1] > best_e:  # the watch continued (planner.watch_levels = 2)
+            best_e, best_v = cont[1], cont[0]
         if depth < s.max_q and steps >= n_q:
             for q in range(len(s.questions)):
                 if q in asked:
@@ -252,6 +254,20 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
                 steps == n_q or b @ (informed - decide(R, b, asked, steps - n_q, depth + 1)) <= -r_q):
             return None
         return r_q + n_q * R.stay[0] + informed
+
+    def continued(kid, bc, w):
+        """The child's watch of ``w`` continued: a grandchild per branch ``h``, then ask or commit; weighed
+        by ``bc`` over the branches, each branch credited its own return."""
+        ret = {}
+        for h in s.branches:
+            bg = _watched_belief(cfg, snap.goals.target_index, bc, kid.loglik[0, h, w], snap.mode)
+            grand = roll(kid.watch_positions[0, h, w], kid.watch_quats[0, h, w], bg, s.n - 2 * s.n_w)
+            ret[h] = kid.watch_return[0, h, w] + decide(grand, bg, frozenset(), s.n - 2 * s.n_w, 0)[h]
+        value = sum(bc[h] * r for h, r in ret.items()) / sum(bc[h] for h in ret)
+        vec = np.full(len(b0), value)
+        for h, r in ret.items():
+            vec[h] = r
+        return vec, value
 
     R = roll(pose.position, pose.quat_wxyz, b0, s.n, s.n_w)
     root = b0.copy()  # the root's average: every goal, or (root_goals = "top") the branches renormalised
@@ -275,8 +291,9 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
         for h in over:
             g = h if h in branches else max(branches, key=lambda b: (R.loglik[0, h, w, b], -branches.index(b)))
             bc = _watched_belief(cfg, snap.goals.target_index, b0, R.loglik[0, g, w], snap.mode)
-            kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w)
-            total += b0[h] * (R.watch_return[0, h, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0)[h])
+            kid = roll(R.watch_positions[0, g, w], R.watch_quats[0, g, w], bc, s.n - s.n_w, s.n_w * s.continues)
+            cont = continued(kid, bc, w) if s.continues else None
+            total += b0[h] * (R.watch_return[0, h, w] + decide(kid, bc, frozenset(), s.n - s.n_w, 0, cont)[h])
         watched[s.moves[w]] = total / sum(b0[h] for h in over)
     return out, watched
 
@@ -311,6 +328,37 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, th
         assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
     for a, v in ref_watched.items():
         assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_a_continued_watch_equals_the_plain_recursion_on_random_problems(seed):
+    """``planner.watch_levels = 2``: each child may keep its motion for another watch, then ask or commit
+    (``planner/continued_watch.py``); the batched search, its children one per motion and its grandchildren
+    deduplicated, gives the plain recursion's values, with Scene 2's shared orientations in half the
+    problems."""
+    rng = np.random.default_rng(100 + seed)
+    scene = load_scene(("scene1", "scene2")[seed % 2])
+    cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_s=1.0 if seed % 4 < 2 else 0.5, max_questions=1,
+               watch_levels=2, watch_moves=int(rng.integers(0, 3)), top_goals=(10, 3)[(seed // 2) % 2],
+               watch_branches=("top", "all")[(seed // 4) % 2], question_gate=("none", "information")[seed % 2])
+    model = SharedAutonomyModel(cfg)
+    goals = model.initial_belief(scene.goals).goals
+    probs = rng.dirichlet(np.full(len(goals), 0.7)) + 1e-6
+    start = Pose(scene.start.position + rng.normal(0.0, 0.05, 3), scene.start.quat_wxyz)
+    mode = Mode.TRANSLATION if seed % 3 else Mode.ROTATION
+    snap = Snapshot(goals, probs, start, np.zeros(6), mode, budget_s=None,
+                    user_speed=(float(rng.uniform(0.01, 0.1)), float(rng.uniform(0.05, 0.3))))
+    search = WatchSearch(model, snap)
+    assert search.continues
+    values, watched, complete = search.run()
+    ref_values, ref_watched = _reference_values(model, snap)
+    assert complete and watched.keys() == ref_watched.keys()
+    for a, v in ref_values.items():
+        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    for a, v in ref_watched.items():
+        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    one = WatchSearch(SharedAutonomyModel(_cfg(**{**cfg.planner.model_dump(), "watch_levels": 1})), snap).run()
+    assert one[0] == values  # commits and questions: the root is not changed by its children's option
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -348,7 +396,7 @@ def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitme
     s = WatchSearch(model, _snap(speed=(0.0, 0.0)))
     values, watched, _ = s.run()
     pose = s.snap.pose
-    R = s._rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
+    R = s.rollouts(pose.position[None], pose.quat_wxyz[None], s.b0[None], s.n, s.n_w)
     stand_then = s.n_w * R.stay[0][:, None] + R.value[0, :, :, s.n - s.n_w]  # (G, A)
     best = max(float(s.b0 @ stand_then[:, a]) for a in range(len(s.moves)))
     assert watched[NO_ASSIST] == pytest.approx(best, rel=1e-3)

@@ -87,7 +87,7 @@ def test_at_the_start_ho_is_not_dominated_by_any_move():
 
     snap = Snapshot(GOALS, np.full(len(GOALS), 1.0 / len(GOALS)), SCENE.start, np.zeros(6), user_speed=WALKING)
     search = WatchSearch(MODEL, snap)
-    R = search._rollouts(SCENE.start.position[None], SCENE.start.quat_wxyz[None], search.b0[None], search.n)
+    R = search.rollouts(SCENE.start.position[None], SCENE.start.quat_wxyz[None], search.b0[None], search.n)
     values = R.value[0, :, :, search.n]  # (goal, action)
     ho = next(i for i, a in enumerate(search.moves) if a.kind is ActionKind.HO)
     for i, a in enumerate(search.moves):

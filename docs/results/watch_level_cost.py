@@ -47,7 +47,7 @@ def second_level_cost(search: WatchSearch) -> dict[str, float]:
     quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
     B = search.child_beliefs(R, ws)
     n, n_w = search.n, search.n_w
-    K = search._rollouts(pos, quat, B, n - n_w, n_w)  # every child, with the step a continued watch reads
+    K = search.rollouts(pos, quat, B, n - n_w, n_w)  # every child, with the step a continued watch reads
     t2 = time.perf_counter()
     share, copy = search.cfg.planner.watch_evidence, search.cfg.planner.watch_copy_evidence
     target_index = search.snap.goals.target_index
@@ -59,7 +59,7 @@ def second_level_cost(search: WatchSearch) -> dict[str, float]:
             gq.append(K.watch_quats[c, g, w])
             gb.append(watched_beliefs(B[c], K.loglik[c][g, w], target_index, share, copy))
     gp, gq, gb = np.concatenate(gp), np.concatenate(gq), np.concatenate(gb)
-    G2 = search._rollouts(gp, gq, gb, n - 2 * n_w)
+    G2 = search.rollouts(gp, gq, gb, n - 2 * n_w)
     m = len(gb)
     none = np.zeros((m, len(search.questions)), dtype=bool)
     search.decide(G2, np.arange(m), gb, none, none.copy(), n - 2 * n_w)

@@ -66,6 +66,7 @@ from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import pregrasp_points
 from ..model.model import SharedAutonomyModel
 from ..world.goals import target_object
+from .continued_watch import continued
 from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
@@ -87,13 +88,19 @@ def _frozen(x: FloatArray) -> FloatArray:
     return out
 
 
+CONTINUE = -1
+"""``decide``'s choice where a child keeps its watched motion (``planner.watch_levels = 2``)."""
+
+
 @dataclass(frozen=True)
 class _Children:
     """The distinct children of the watched motions: their rollouts (maybe still running), beliefs
-    ``(n, G)``, and for every (motion, branch) in order the index of its child."""
+    ``(n, G)``, each one's motion (an index of ``moves``), and for every (motion, branch) in order the
+    index of its child."""
 
     rollouts: Rollouts
     beliefs: FloatArray
+    motions: np.ndarray
     of_branch: np.ndarray
 
 
@@ -150,6 +157,8 @@ class WatchSearch:
         move_ix = [i for i, a in enumerate(self.moves) if a.kind is ActionKind.MOVE][: pc.watch_moves]
         other_ix = [i for i, a in enumerate(self.moves) if a.kind is not ActionKind.MOVE]
         self.watched = (other_ix + move_ix) if pc.watch_levels > 0 and self.n > 1 else []
+        self.continues = pc.watch_levels > 1 and self.n > 2 * self.n_w
+        """A child may keep its motion for another watch (:mod:`.continued_watch`)."""
         self.nodes = 0
         self.children = 0
         """Distinct children of the watched motions searched (branches turning alike are one child)."""
@@ -159,8 +168,10 @@ class WatchSearch:
 
     # -- pieces ------------------------------------------------------------------------------------------
 
-    def _rollouts(self, positions: FloatArray, quats: FloatArray, weights: FloatArray, steps: int,
-                  watch_steps: int = 0, background: bool = False) -> Rollouts:
+    def rollouts(self, positions: FloatArray, quats: FloatArray, weights: FloatArray, steps: int,
+                 watch_steps: int = 0, background: bool = False) -> Rollouts:
+        """This snapshot's rollouts (its goals' ``k_c``, its motions, mode and speed) from start poses
+        ``positions`` ``(C, 3)`` and ``quats`` ``(C, 4)`` under beliefs ``weights`` ``(C, G)``."""
         s = self.snap
         return Rollouts(self.cfg, positions, quats, weights, self.kp, self.kq, self.moves, s.mode, s.user_speed,
                         steps, self.dt, watch_steps, pregrasp=self.pregrasp, background=background,
@@ -170,7 +181,7 @@ class WatchSearch:
         """The rollouts from the snapshot's pose and belief over the whole horizon, with the watched steps if
         any motion is watched: the root's commit values, and the predicted input's ``loglik``."""
         pose = self.snap.pose
-        return self._rollouts(pose.position[None], pose.quat_wxyz[None], self.b0[None], self.n,
+        return self.rollouts(pose.position[None], pose.quat_wxyz[None], self.b0[None], self.n,
                               self.n_w if self.watched else 0)
 
     def _out_of_budget(self) -> bool:
@@ -178,11 +189,13 @@ class WatchSearch:
         return time.perf_counter() > self.deadline or (self.node_budget is not None and self.nodes >= self.node_budget)
 
     def decide(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray, steps: int,
-               depth: int = 0) -> tuple[FloatArray, np.ndarray]:
+               depth: int = 0, watch: tuple[FloatArray, FloatArray] | None = None) -> tuple[FloatArray, np.ndarray]:
         """``D`` for a batch: the tracker at beliefs ``B`` ``(n, G)``, at start poses ``c`` ``(n,)`` of ``R``
         with ``steps`` left, after the answers ``yes`` ``(n, Q)`` to the questions ``asked`` ``(n, Q)``,
         picks the action best by its belief. Returns what that choice is worth *if the goal is g*,
-        ``(n, G)``, and the choice: ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``."""
+        ``(n, G)``, and the choice: ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``,
+        :data:`CONTINUE` the watch continued, where ``watch`` gives each node that option (its vectors
+        ``(n, G)`` and the values the tracker weighs them by ``(n,)``, :func:`.continued_watch.continued`)."""
         self.nodes += len(B)
         n = len(B)
         rows = np.arange(n)
@@ -202,6 +215,10 @@ class WatchSearch:
             V, best = M[c, :, act], E[rows, act]
         else:
             act, V, best = np.zeros(n, dtype=int), np.full(B.shape, -np.inf), np.full(n, -np.inf)
+        if watch is not None:
+            keep = watch[1] > best
+            V = np.where(keep[:, None], watch[0], V)
+            act, best = np.where(keep, CONTINUE, act), np.where(keep, watch[1], best)
         avail = ~asked
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
                 or 2 * int(avail.sum()) > MAX_BATCH):
@@ -320,11 +337,18 @@ class WatchSearch:
         """``b'_gw`` for every watched motion ``w`` in ``ws`` and branch ``g``: ``(len(ws) * branches, G)``,
         motion by motion (:func:`watched_beliefs`)."""
         ll = R.loglik[0][self.branches][:, ws].transpose(1, 0, 2).reshape(-1, len(self.b0))
+        share, copy = self.watch_share()
+        return watched_beliefs(self.b0, ll, self.snap.goals.target_index, share, copy)
+
+    def watch_share(self) -> tuple[float, float]:
+        """The share of the predicted input's evidence a watched belief takes (``planner.watch_evidence``, in
+        rotation mode ``watch_evidence_rotation`` where set) and its share between copies of one target
+        (``planner.watch_copy_evidence``)."""
         pc = self.cfg.planner
         share = pc.watch_evidence
         if self.snap.mode is Mode.ROTATION and pc.watch_evidence_rotation is not None:
             share = pc.watch_evidence_rotation
-        return watched_beliefs(self.b0, ll, self.snap.goals.target_index, share, pc.watch_copy_evidence)
+        return share, pc.watch_copy_evidence
 
     def start_children(self, R: Rollouts) -> _Children:
         """The children of every watched motion, their rollouts started on the rollout threads (:meth:`run`
@@ -334,12 +358,16 @@ class WatchSearch:
         B = self.child_beliefs(R, ws)
         pos = np.concatenate([R.watch_positions[0, g, w] for w in ws])
         quat = np.concatenate([R.watch_quats[0, g, w] for w in ws])
+        motions = np.repeat(ws, len(g))
         # Turning, branches whose goals share an orientation are the same child (the user turns by the
-        # goal's orientation alone, and the tracker reads the turn by it): each distinct one is searched once.
-        first, kid = distinct_rows(np.concatenate((pos, quat, B), axis=1))
+        # goal's orientation alone, and the tracker reads the turn by it): each distinct one is searched once
+        # (one per motion where a child may continue its motion).
+        rows = (pos, quat, B) + ((motions[:, None].astype(float),) if self.continues else ())
+        first, kid = distinct_rows(np.concatenate(rows, axis=1))
         self.children = len(first)
-        rollouts = self._rollouts(pos[first], quat[first], B[first], self.n - self.n_w, background=True)
-        return _Children(rollouts, B[first], kid)
+        rollouts = self.rollouts(pos[first], quat[first], B[first], self.n - self.n_w,
+                                 self.n_w if self.continues else 0, background=True)
+        return _Children(rollouts, B[first], motions[first], kid)
 
     def watch_values(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[Action, float]:
         """``watch(w)`` of the module doc for every watched motion, all branches in one rollout batch
@@ -359,7 +387,8 @@ class WatchSearch:
         kids.rollouts.join()
         n = len(kids.beliefs)
         A = np.repeat(asked, n, axis=0)
-        V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w)
+        watch = continued(self, kids.rollouts, kids.beliefs, kids.motions, A) if self.continues else None
+        V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w, watch=watch)
         g, ws = self.branches, self.watched
         kid = kids.of_branch.reshape(len(ws), len(g))  # each (motion, branch)'s child, rows of V
         out = {}

@@ -13,17 +13,19 @@ from ..geometry import FloatArray
 
 
 def posterior(b0: FloatArray, ll: FloatArray) -> FloatArray:
-    """Bayes: ``b0 * exp(ll)`` normalised per row of ``ll`` ``(m, G)``; goals ``b0`` rules out stay out."""
-    log_b = np.log(np.maximum(b0, 1e-300))[None] + ll
+    """Bayes: ``b0 * exp(ll)`` normalised per row of ``ll`` ``(m, G)``, ``b0`` one prior ``(G,)`` or one a row
+    ``(m, G)``; goals ``b0`` rules out stay out."""
+    log_b = np.log(np.maximum(b0, 1e-300)) + ll
     log_b -= log_b.max(axis=1, keepdims=True)
-    b = np.exp(log_b) * (b0 > 0)[None]
+    b = np.exp(log_b) * (b0 > 0)
     return b / b.sum(axis=1, keepdims=True)
 
 
 def watched_beliefs(b0: FloatArray, ll: FloatArray, target_index: np.ndarray, evidence: float = 1.0,
                     copy_evidence: float = 1.0) -> FloatArray:
     """The beliefs the watch expects after predicted input of log-likelihood ``ll`` ``(m, G)`` (nats, one
-    row a branch) from belief ``b0`` ``(G,)``. With ``lambda = evidence`` (``planner.watch_evidence``) and
+    row a branch) from belief ``b0`` (``(G,)``, or one a row ``(m, G)``). With ``lambda = evidence``
+    (``planner.watch_evidence``) and
     ``kappa = copy_evidence`` (``planner.watch_copy_evidence``), for goal ``g`` of target ``t(g)``:
 
         P(t)     = sum over g' in t of  b0[g'] exp(lambda ll[g'])  /  sum over all g' of the same
