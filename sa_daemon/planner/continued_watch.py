@@ -47,6 +47,7 @@ def continued(search: WatchSearch, kids: Rollouts, beliefs: FloatArray, motions:
     share, copy = search.watch_share()
     B2 = watched_beliefs(np.repeat(beliefs, nb, axis=0), ll, search.snap.goals.target_index, share, copy)
     first, kid = distinct_rows(np.concatenate((pos, quat, B2), axis=1))
+    search.grandchildren = len(first)
     steps = search.n - 2 * search.n_w
     grand = search.rollouts(pos[first], quat[first], B2[first], steps)
     A = np.repeat(asked[:1], len(first), axis=0)

@@ -11,8 +11,10 @@ steps left at belief ``b`` and pose ``x``:
 
     commit_a[g]  = M_x[g, a, s]                                               (:mod:`.rollouts`)
     ask_q[g]     = -5 + n_q stay_x[g] + P(yes | g) D(b_yes, x, s - n_q)[g] + P(no | g) D(b_no, x, s - n_q)[g]
-    watch_w[g]   = W_x[g, w] + D(b'_gw, x'_gw, s - n_w)[g]                    (root only, watch_levels = 1)
+    watch_w[g]   = W_x[g, w] + D(b'_gw, x'_gw, s - n_w)[g]                    (at the root)
     D(b, x, s)   = the vector of the action in {commit_a, ask_q} with the largest b . vector
+                   (and, with planner.watch_levels = 2, at a child of the root's watch of w: that watch
+                   continued, :mod:`.continued_watch`)
 
 where ``W_x[g, w]`` is the return of the watched steps alone (the terminal charge belongs to the end of the
 horizon only). At every node the *tracker* picks the action that is best by *its* belief, as the daemon will, and the
@@ -162,6 +164,8 @@ class WatchSearch:
         self.nodes = 0
         self.children = 0
         """Distinct children of the watched motions searched (branches turning alike are one child)."""
+        self.grandchildren = 0
+        """Distinct grandchildren searched where a child may continue its watch (:mod:`.continued_watch`)."""
         self._memo: dict[tuple[int, int], tuple[Rollouts, FloatArray]] = {}
         self._askable: tuple[Rollouts, dict[NodeKey, frozenset[int]]] | None = None
         """While :meth:`tree` searches: the root's rollouts and the questions each of their nodes may ask."""
