@@ -52,6 +52,7 @@ VARIANTS = {
     "one-second questions": {"reward": {"question_time_s": 1.0}},  # chains five deep
     "questions as long as the horizon, no gate": {"reward": {"question_time_s": 5.0},
                                                   "planner": {"question_gate": "none"}},
+    "a watch that may be continued": {"planner": {"watch_levels": 2}},  # still a terminal payoff per goal
 }
 
 
