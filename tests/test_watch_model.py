@@ -298,6 +298,18 @@ def _reference_values(model: SharedAutonomyModel, snap: Snapshot) -> dict:
     return out, watched
 
 
+def _assert_the_reference_values(model, snap, values, watched, complete) -> None:
+    """The search's ``run()`` (``values``, ``watched``, ``complete``) gives every root action the plain
+    recursion's value."""
+    ref_values, ref_watched = _reference_values(model, snap)
+    assert complete
+    assert values.keys() == ref_values.keys() and watched.keys() == ref_watched.keys()
+    for a, v in ref_values.items():
+        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    for a, v in ref_watched.items():
+        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+
+
 @pytest.mark.parametrize("third", [False, True])
 @pytest.mark.parametrize("seed", range(12))
 def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, third):
@@ -321,13 +333,7 @@ def test_the_batched_search_equals_a_plain_recursion_on_random_problems(seed, th
     snap = Snapshot(goals, probs, start, np.zeros(6), mode, budget_s=None,
                     user_speed=(float(rng.uniform(0, 0.1)), float(rng.uniform(0, 0.3))))
     values, watched, complete = WatchSearch(model, snap).run()
-    ref_values, ref_watched = _reference_values(model, snap)
-    assert complete
-    assert values.keys() == ref_values.keys() and watched.keys() == ref_watched.keys()
-    for a, v in ref_values.items():
-        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
-    for a, v in ref_watched.items():
-        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    _assert_the_reference_values(model, snap, values, watched, complete)
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -351,12 +357,7 @@ def test_a_continued_watch_equals_the_plain_recursion_on_random_problems(seed):
     search = WatchSearch(model, snap)
     assert search.continues
     values, watched, complete = search.run()
-    ref_values, ref_watched = _reference_values(model, snap)
-    assert complete and watched.keys() == ref_watched.keys()
-    for a, v in ref_values.items():
-        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
-    for a, v in ref_watched.items():
-        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    _assert_the_reference_values(model, snap, values, watched, complete)
     one = WatchSearch(SharedAutonomyModel(_cfg(**{**cfg.planner.model_dump(), "watch_levels": 1})), snap).run()
     assert one[0] == values  # commits and questions: the root is not changed by its children's option
 
@@ -380,12 +381,7 @@ def test_branches_turning_alike_are_searched_once_with_the_values_of_the_plain_r
     twins = len(search.branches) - len({tuple(search.kq[g]) for g in search.branches})
     assert twins > 0  # the case under test: branches whose goals share an orientation
     assert search.children == len(search.watched) * (len(search.branches) - twins)
-    ref_values, ref_watched = _reference_values(model, snap)
-    assert complete and watched.keys() == ref_watched.keys()
-    for a, v in ref_values.items():
-        assert values[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
-    for a, v in ref_watched.items():
-        assert watched[a] == pytest.approx(v, rel=1e-9, abs=1e-6), a.label
+    _assert_the_reference_values(model, snap, values, watched, complete)
 
 
 def test_watching_no_assist_with_an_idle_user_is_standing_then_the_best_commitment():
