@@ -59,8 +59,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,7 +72,7 @@ from .continued_watch import continued
 from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
-from .watch_tree import NodeKey, WatchTree, node_key, watch_tree
+from .watch_tree import NodeKey, WatchTree, node_key
 from .watched_beliefs import watched_beliefs
 
 MAX_BATCH = 20_000
@@ -83,6 +81,13 @@ GATHER_RATIO, MAX_GATHER = 4, 4_000_000
 """``decide`` values a batch by one ``(n, G, A)`` gather where it has more than one start pose per
 ``GATHER_RATIO`` nodes and the gather holds at most ``MAX_GATHER`` numbers, else by one matrix product
 per start pose."""
+
+
+def _frozen(x: FloatArray) -> FloatArray:
+    """A read-only copy of ``x``."""
+    out = np.array(x)
+    out.setflags(write=False)
+    return out
 
 
 CONTINUE = -1
@@ -225,7 +230,7 @@ class WatchSearch:
         if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
             if self.gated:  # no decision after the answer: no information worth anything
                 return V, act
-            w = self.ask_last(R, c)
+            w = self._ask_last(R, c)
             self._note_askable(R, steps, asked, yes, avail)
             eq = np.einsum("ng,ng->n", B, w)
             q = avail.argmax(axis=1)
@@ -273,7 +278,7 @@ class WatchSearch:
         Vq = np.full((n, nq, B.shape[1]), -np.inf)
         if steps == self.n_q:  # no decision after the answer: with the gate no question is worth its cost
             if not self.gated:
-                Vq[node, q] = self.ask_last(R, c[node])
+                Vq[node, q] = self._ask_last(R, c[node])
             return Vq
         total = self.cfg.reward.question + self.n_q * R.stay[c[node]]  # (k, G): asked, the arm stands still
         Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
@@ -306,7 +311,7 @@ class WatchSearch:
             Vq[node[closed], q[closed]] = -np.inf
         return Vq
 
-    def ask_last(self, R: Rollouts, c: np.ndarray) -> FloatArray:
+    def _ask_last(self, R: Rollouts, c: np.ndarray) -> FloatArray:
         """``ask_q`` with no time left after the answer, the same for every question: asked, the arm stands
         still, and whatever the answer, the pose's value at the horizon (no action moves in 0 steps: any
         column of ``value``). ``(n, G)`` for start poses ``c``."""
@@ -324,7 +329,7 @@ class WatchSearch:
         equal = B + m_asked[:, None] * self.eq_share[q]
         return np.where(A, 0.0, np.where((m_sib > 0.0)[:, None], scaled, equal))
 
-    def root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
+    def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
         """Value of every question at the root (then the tracker's choices), by the root belief; a question
         the gate closes (``planner.question_gate``) is left out."""
         if self.max_q < 1 or not self.questions or self.n < self.n_q:
@@ -373,9 +378,9 @@ class WatchSearch:
         (:meth:`start_children`). In branch ``g`` the tracker decides by its belief ``b'_gw`` and the
         outcome is counted for goal ``g``: a watch that would mislead the tracker is worth what the misled
         choice earns."""
-        return {self.moves[w]: value for w, (_, _, value) in self.watch_returns(R, kids, asked).items()}
+        return {self.moves[w]: value for w, (_, _, value) in self._watch_returns(R, kids, asked).items()}
 
-    def watch_returns(self, R: Rollouts, kids: _Children,
+    def _watch_returns(self, R: Rollouts, kids: _Children,
                        asked: np.ndarray) -> dict[int, tuple[np.ndarray, FloatArray, float]]:
         """Per watched motion ``w``: the goals its value is averaged over, what it returns for each of them,
         and that average. ``watch_branches`` "top" and "all": the branches, each its own child, by the
@@ -418,7 +423,7 @@ class WatchSearch:
         # the children's rollouts run while this thread asks the root's questions (they need only R), and
         # are dropped if the questions use up the budget: the values are those of the two stages in turn
         kids = self.start_children(R) if self.watched else None
-        for q, v in self.root_questions(R, asked).items():
+        for q, v in self._root_questions(R, asked).items():
             values[self.questions[q]] = float(v)
         if kids is None:
             return values, {}, True
@@ -428,18 +433,43 @@ class WatchSearch:
         return values, self.watch_values(R, kids, asked), True
 
     def tree(self) -> WatchTree:
-        """This snapshot's problem as plain data (:func:`.watch_tree.watch_tree`)."""
-        return watch_tree(self)
-
-    @contextmanager
-    def noting_askable(self, R: Rollouts) -> Iterator[dict[NodeKey, frozenset[int]]]:
-        """Within the block, the questions each node of ``R``'s question tree may ask are noted in the dict
-        it yields (by :meth:`decide`; :func:`.watch_tree.watch_tree`)."""
+        """This snapshot's problem as plain data (:class:`~.watch_tree.WatchTree`), searched without a
+        deadline: the commits' returns, the questions' costs and likelihoods, the questions every node of
+        the root's question tree may ask, and each watched motion's payoff per goal. Not for the
+        ``asking.third_answer`` model (its "other" answer is not a Bayes update) nor ``planner.root_goals =
+        "top"`` (the root averages by another belief than its answers update)."""
+        if self.third:
+            raise ValueError("asking.third_answer: the watch tree holds yes/no questions only")
+        if self.cfg.planner.root_goals != "all":
+            raise ValueError('planner.root_goals: the watch tree needs "all" (one belief for the root and its answers)')
+        R = self.root_rollouts()
+        asked = np.zeros((1, len(self.questions)), dtype=bool)
+        kids = self.start_children(R) if self.watched else None
         self._askable = (R, {})
         try:
-            yield self._askable[1]
+            root = frozenset(self._root_questions(R, asked))
         finally:
+            _, askable = self._askable
             self._askable = None
+        askable[node_key(self.n, (), ())] = root
+        watches = self._watch_vectors(R, kids, asked) if kids is not None else {}
+        return WatchTree(
+            moves=tuple(self.moves), questions=tuple(self.questions), b=_frozen(self.b_root), value=_frozen(R.value[0]),
+            question_cost=_frozen(self.cfg.reward.question + self.n_q * R.stay[0]),
+            last_question=_frozen(self._ask_last(R, np.zeros(1, dtype=int))[0]), L_yes=_frozen(self.L_yes),
+            n=self.n, n_q=self.n_q, askable=askable, watches={w: _frozen(v) for w, v in watches.items()},
+        )
+
+    def _watch_vectors(self, R: Rollouts, kids: _Children, asked: np.ndarray) -> dict[int, FloatArray]:
+        """Each watched motion's payoff per goal, ``(G,)``, whose average by the root belief is its value:
+        its return for the goals it is averaged over; for any other goal the value itself ("top", "all") or
+        0 ("mapped": the belief holds none of them)."""
+        out = {}
+        for w, (h, ret, value) in self._watch_returns(R, kids, asked).items():
+            vec = np.full(len(self.b0), value if self.cfg.planner.watch_branches != "mapped" else 0.0)
+            vec[h] = ret
+            out[w] = vec
+        return out
 
 
 def plan_watch(model: SharedAutonomyModel, snap: Snapshot) -> PlanResult:

@@ -1,7 +1,7 @@
 """The watch model's tree at one snapshot as plain data: what another planner needs to plan the same model.
 
-:func:`watch_tree` searches a snapshot exhaustively (:class:`~.watch.WatchSearch`) and writes down every
-number its root decision rests on; a planner that knows nothing of rollouts or trackers (``bench/peer.py``, pomdp_py's
+:meth:`~.watch.WatchSearch.tree` searches a snapshot exhaustively and writes down every number its root
+decision rests on; a planner that knows nothing of rollouts or trackers (``bench/peer.py``, pomdp_py's
 POUCT) then plans the same problem, and :func:`exact_values` solves it by plain recursion, the reference
 the tests hold the search to. With ``G`` goals, ``A`` commits (``moves``) and ``Q`` questions:
 
@@ -14,8 +14,7 @@ the tests hold the search to. With ``G`` goals, ``A`` commits (``moves``) and ``
   lists it for the node (``planner.question_gate``, the depth limits); with ``s = n_q`` nothing can be done
   after the answer and the question ends the episode with ``last_question[g]``;
 * a watch of motion ``w`` (root only) ends the episode with ``watches[w][g]``: the watched steps' return
-  plus what the tracker's picks after the predicted input (a continued watch among them, with
-  ``planner.watch_levels = 2``) earn for ``g`` (``docs/model.md``, "A pomdp_py
+  plus what the tracker's pick after the predicted input earns for ``g`` (``docs/model.md``, "A pomdp_py
   peer for it", has why it is a terminal payoff and not a belief update). ``b`` sums to 1 and
   ``b . watches[w]`` is the watch's value: with ``planner.watch_branches`` "top" or "all" a goal outside
   the watch's branches is paid that value itself; with "mapped" every goal ``b`` holds has its own return.
@@ -27,15 +26,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
-import numpy as np
 
 from ..geometry import FloatArray
 from ..model.actions import Action
-
-if TYPE_CHECKING:
-    from .watch import WatchSearch
 
 NodeKey = tuple[int, frozenset[int], frozenset[int]]
 """A node of the question tree: (rollout steps left, questions asked, questions answered yes)."""
@@ -50,8 +43,8 @@ def node_key(steps: int, asked: Iterable[int], yes: Iterable[int]) -> NodeKey:
 
 @dataclass(frozen=True, eq=False)
 class WatchTree:
-    """One snapshot's watch-model problem (module doc); built by :func:`watch_tree`. Its arrays are
-    read-only; returns are undiscounted."""
+    """One snapshot's watch-model problem (module doc); built by :meth:`~.watch.WatchSearch.tree`. Its arrays
+    are read-only; returns are undiscounted."""
 
     moves: tuple[Action, ...]
     questions: tuple[Action, ...]
@@ -76,45 +69,6 @@ class WatchTree:
         """The questions the node reached by ``answers`` may ask."""
         key = node_key(self.steps_left(answers), (q for q, _ in answers), (q for q, yes in answers if yes))
         return self.askable.get(key, frozenset())
-
-
-def _frozen(x: FloatArray) -> FloatArray:
-    """A read-only copy of ``x``."""
-    out = np.array(x)
-    out.setflags(write=False)
-    return out
-
-
-def watch_tree(search: WatchSearch) -> WatchTree:
-    """``search``'s snapshot as a :class:`WatchTree`, searched without a deadline: the commits' returns, the
-    questions' costs and likelihoods, the questions every node of the root's question tree may ask, and
-    each watched motion's payoff per goal. Not for the ``asking.third_answer`` model (its "other" answer is
-    not a Bayes update) nor ``planner.root_goals = "top"`` (the root averages by another belief than its
-    answers update)."""
-    if search.third:
-        raise ValueError("asking.third_answer: the watch tree holds yes/no questions only")
-    if search.cfg.planner.root_goals != "all":
-        raise ValueError('planner.root_goals: the watch tree needs "all" (one belief for the root and its answers)')
-    R = search.root_rollouts()
-    asked = np.zeros((1, len(search.questions)), dtype=bool)
-    kids = search.start_children(R) if search.watched else None
-    with search.noting_askable(R) as askable:
-        root = frozenset(search.root_questions(R, asked))
-    askable[node_key(search.n, (), ())] = root
-    watches = {}
-    mapped = search.cfg.planner.watch_branches == "mapped"
-    if kids is not None:  # each motion's payoff per goal: its return for the goals it is averaged over; for
-        # any other goal the value itself ("top", "all") or 0 ("mapped": the belief holds none of them)
-        for w, (h, ret, value) in search.watch_returns(R, kids, asked).items():
-            vec = np.full(len(search.b0), 0.0 if mapped else value)
-            vec[h] = ret
-            watches[w] = _frozen(vec)
-    return WatchTree(
-        moves=tuple(search.moves), questions=tuple(search.questions), b=_frozen(search.b_root),
-        value=_frozen(R.value[0]), question_cost=_frozen(search.cfg.reward.question + search.n_q * R.stay[0]),
-        last_question=_frozen(search.ask_last(R, np.zeros(1, dtype=int))[0]), L_yes=_frozen(search.L_yes),
-        n=search.n, n_q=search.n_q, askable=askable, watches=watches,
-    )
 
 
 def exact_values(tree: WatchTree) -> dict[Action, float]:
