@@ -29,6 +29,7 @@ from ..model.actions import Action, ActionKind
 from ..model.model import SharedAutonomyModel
 from ..model.reward import distance_reward, opposes, opposition_reward
 from ..model.twists import blend, ho_robot_twist, move_twist
+from .answers import yes_likelihood
 from .snapshot import Snapshot
 
 
@@ -52,10 +53,7 @@ class Problem:
         # M[g, a]: reward of move a if the goal is g.
         self.M = self._move_rewards() if self.moves else np.zeros((len(goals), 0))
         self.q_reward = self.q_reward - self._question_time_cost()
-        # L_yes[q, g] = P(yes | g, question q).
-        p = cfg.intent.answer_p_correct
-        qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
-        self.L_yes = np.where(qi[:, None] == goals.target_index[None, :], p, 1.0 - p)
+        self.L_yes = yes_likelihood(self.questions, goals, cfg.intent.answer_p_correct)  # P(yes | g, question q)
         self.U = self._upper_bounds()
 
     def _rewards_at(self, positions: FloatArray, quats: FloatArray) -> FloatArray:

@@ -67,8 +67,8 @@ from ..geometry import FloatArray
 from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import pregrasp_points
 from ..model.model import SharedAutonomyModel
-from ..world.goals import target_object
-from .continued_watch import continued
+from .answers import ThirdAnswer, yes_likelihood
+from .continued_watch import continued_vectors, grandchildren
 from .node_keys import answer_keys, distinct_rows
 from .rollouts import Rollouts
 from .snapshot import PlanResult, Snapshot
@@ -128,24 +128,10 @@ class WatchSearch:
         self.n_q = max(1, round(snap.question_seconds(cfg.reward.question_time_s) / self.dt))
         self.max_q = pc.max_questions if snap.questions_left is None else min(pc.max_questions, snap.questions_left)
         p = cfg.intent.answer_p_correct
-        qi = np.array([goals.targets.index(q.target) for q in self.questions], dtype=int)
-        in_t = (qi[:, None] == goals.target_index[None, :]).reshape(len(qi), len(goals))
-        self.L_yes = np.where(in_t, p, 1.0 - p)
-        self.third = cfg.asking.third_answer
+        self.L_yes = yes_likelihood(self.questions, goals, p)
+        self.third = ThirdAnswer.of(self.questions, goals, p) if cfg.asking.third_answer else None
+        """The answers "yes", "no" and "that object, another grasp" (``asking.third_answer``), or ``None``."""
         self.gated = pc.question_gate == "information"
-        if self.third:  # "yes, that object, but another grasp" (asking.third_answer; docs/model.md)
-            qobj = np.array([target_object(q.target) for q in self.questions])
-            gobj = np.array([g.object for g in goals.goals])
-            self.asked_mask = in_t
-            self.sib = (qobj[:, None] == gobj[None, :]) & ~in_t  # the asked object's other grasps
-            has_sib = self.sib.any(axis=1)[:, None]
-            wrong = np.where(has_sib, (1.0 - p) / 2.0, 1.0 - p)  # a wrong answer, one of the others
-            self.P_yes = np.where(in_t, p, wrong)
-            self.P_other = np.where(has_sib, np.where(self.sib, p, wrong), 0.0)
-            self.P_no = 1.0 - self.P_yes - self.P_other
-            counts = np.bincount(goals.target_index, minlength=len(goals.targets))[goals.target_index]
-            n_sib = np.array([len(set(goals.target_index[row])) for row in self.sib])
-            self.eq_share = np.where(self.sib, 1.0 / np.maximum(n_sib[:, None] * counts[None, :], 1), 0.0)
         pool = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
         self.branches = np.array([g for g in pool if self.b0[g] > 0], dtype=int)
         self.branch_weights = self.b0[self.branches] / self.b0[self.branches].sum()
@@ -269,7 +255,7 @@ class WatchSearch:
                          avail: np.ndarray, steps: int, depth: int) -> FloatArray:
         """``ask_q`` of the module doc for every node and available question, ``(n, Q, G)`` (``-inf`` where
         not available). Each answer is a child: yes and no by the tracker's Bayes update, and with the third
-        answer "other" by :meth:`other_grasp`; each weighted for goal ``g`` by how likely a person with goal
+        answer "other" by :meth:`.answers.ThirdAnswer.other_grasp`; each weighted for goal ``g`` by how likely a person with goal
         ``g`` gives it. The children are deduplicated: a belief depends on the set of answers, not their
         order, so each (start, asked, answers) is decided once."""
         n, nq = avail.shape
@@ -284,10 +270,11 @@ class WatchSearch:
         Bn, y, first_q = B[node], yes[node], np.eye(nq, dtype=bool)[q]
         py = np.einsum("kg,kg->k", Bn, L[q])
         yes_B, no_B = Bn * L[q] / py[:, None], Bn * (1.0 - L[q]) / (1.0 - py)[:, None]
-        if self.third:  # answers per question as 0 (none or no), 1 (yes), 2 (other)
+        if self.third is not None:  # answers per question as 0 (none or no), 1 (yes), 2 (other)
             y = y.astype(np.int8)
-            outcomes = [(yes_B, np.where(first_q, 1, y).astype(np.int8), self.P_yes[q]), (no_B, y, self.P_no[q]),
-                        (self.other_grasp(Bn, q), np.where(first_q, 2, y).astype(np.int8), self.P_other[q])]
+            t = self.third
+            outcomes = [(yes_B, np.where(first_q, 1, y).astype(np.int8), t.P_yes[q]), (no_B, y, t.P_no[q]),
+                        (t.other_grasp(Bn, q), np.where(first_q, 2, y).astype(np.int8), t.P_other[q])]
         else:
             outcomes = [(yes_B, y | first_q, L[q]), (no_B, y, 1.0 - L[q])]
         m = len(outcomes)
@@ -316,18 +303,6 @@ class WatchSearch:
         still, and whatever the answer, the pose's value at the horizon (no action moves in 0 steps: any
         column of ``value``). ``(n, G)`` for start poses ``c``."""
         return self.cfg.reward.question + self.n_q * R.stay[c] + R.value[c, :, 0, 0]
-
-    def other_grasp(self, B: FloatArray, q: np.ndarray) -> FloatArray:
-        """The tracker's belief after "that object, another grasp" to question ``q`` (per row of ``B``):
-        the asked target's probability goes to the object's other targets, in proportion to theirs (equally
-        where they have none); other objects keep theirs (``Belief.after_other_grasp``)."""
-        A, S = self.asked_mask[q], self.sib[q]
-        m_asked = np.einsum("kg,kg->k", B, A)
-        m_sib = np.einsum("kg,kg->k", B, S)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scaled = np.where(S, B * (1.0 + m_asked / m_sib)[:, None], B)
-        equal = B + m_asked[:, None] * self.eq_share[q]
-        return np.where(A, 0.0, np.where((m_sib > 0.0)[:, None], scaled, equal))
 
     def _root_questions(self, R: Rollouts, asked: np.ndarray) -> dict[int, float]:
         """Value of every question at the root (then the tracker's choices), by the root belief; a question
@@ -391,7 +366,7 @@ class WatchSearch:
         kids.rollouts.join()
         n = len(kids.beliefs)
         A = np.repeat(asked, n, axis=0)
-        watch = continued(self, kids.rollouts, kids.beliefs, kids.motions, A) if self.continues else None
+        watch = self._continued(kids, A) if self.continues else None
         V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w, watch=watch)
         g, ws = self.branches, self.watched
         kid = kids.of_branch.reshape(len(ws), len(g))  # each (motion, branch)'s child, rows of V
@@ -409,6 +384,21 @@ class WatchSearch:
             ret = R.watch_return[0, g, w] + V[kid[i], g]  # each branch's own goal
             out[w] = (g, ret, float(self.branch_weights @ ret))
         return out
+
+    def _continued(self, kids: _Children, asked: np.ndarray) -> tuple[FloatArray, FloatArray]:
+        """Every child's watch continued (:mod:`.continued_watch`): its grandchildren, deduplicated like the
+        children, rolled out over the ``n - 2 n_w`` steps left and decided (ask or commit), then what the
+        continuation is worth, ``(vectors (n, G), values (n,))`` for :meth:`decide`'s ``watch``."""
+        share, copy = self.watch_share()
+        pos, quat, B = grandchildren(kids.rollouts, kids.beliefs, kids.motions, self.branches,
+                                     self.snap.goals.target_index, share, copy)
+        first, kid = distinct_rows(np.concatenate((pos, quat, B), axis=1))
+        self.grandchildren = len(first)
+        steps = self.n - 2 * self.n_w
+        A = np.repeat(asked[:1], len(first), axis=0)
+        V, _ = self.decide(self.rollouts(pos[first], quat[first], B[first], steps), np.arange(len(first)), B[first],
+                           A, A.copy(), steps)
+        return continued_vectors(kids.rollouts, kids.beliefs, kids.motions, self.branches, V[kid])
 
     # -- search ------------------------------------------------------------------------------------------
 
@@ -438,7 +428,7 @@ class WatchSearch:
         the root's question tree may ask, and each watched motion's payoff per goal. Not for the
         ``asking.third_answer`` model (its "other" answer is not a Bayes update) nor ``planner.root_goals =
         "top"`` (the root averages by another belief than its answers update)."""
-        if self.third:
+        if self.third is not None:
             raise ValueError("asking.third_answer: the watch tree holds yes/no questions only")
         if self.cfg.planner.root_goals != "all":
             raise ValueError('planner.root_goals: the watch tree needs "all" (one belief for the root and its answers)')

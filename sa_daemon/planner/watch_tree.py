@@ -14,7 +14,8 @@ the tests hold the search to. With ``G`` goals, ``A`` commits (``moves``) and ``
   lists it for the node (``planner.question_gate``, the depth limits); with ``s = n_q`` nothing can be done
   after the answer and the question ends the episode with ``last_question[g]``;
 * a watch of motion ``w`` (root only) ends the episode with ``watches[w][g]``: the watched steps' return
-  plus what the tracker's pick after the predicted input earns for ``g`` (``docs/model.md``, "A pomdp_py
+  plus what the tracker's picks after the predicted input (a continued watch among them, with
+  ``planner.watch_levels = 2``) earn for ``g`` (``docs/model.md``, "A pomdp_py
   peer for it", has why it is a terminal payoff and not a belief update). ``b`` sums to 1 and
   ``b . watches[w]`` is the watch's value: with ``planner.watch_branches`` "top" or "all" a goal outside
   the watch's branches is paid that value itself; with "mapped" every goal ``b`` holds has its own return.
