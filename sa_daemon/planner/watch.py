@@ -172,7 +172,7 @@ class WatchSearch:
         any motion is watched: the root's commit values, and the predicted input's ``loglik``."""
         pose = self.snap.pose
         return self.rollouts(pose.position[None], pose.quat_wxyz[None], self.b0[None], self.n,
-                              self.n_w if self.watched else 0)
+                             self.n_w if self.watched else 0)
 
     def _out_of_budget(self) -> bool:
         """The deadline has passed or ``node_budget`` beliefs have been evaluated."""
@@ -185,7 +185,7 @@ class WatchSearch:
         picks the action best by its belief. Returns what that choice is worth *if the goal is g*,
         ``(n, G)``, and the choice: ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``,
         :data:`CONTINUE` the watch continued, where ``watch`` gives each node that option (its vectors
-        ``(n, G)`` and the values the tracker weighs them by ``(n,)``, :func:`.continued_watch.continued`)."""
+        ``(n, G)`` and the values the tracker weighs them by ``(n,)``, :meth:`_continued`)."""
         self.nodes += len(B)
         n = len(B)
         rows = np.arange(n)
@@ -255,8 +255,8 @@ class WatchSearch:
                          avail: np.ndarray, steps: int, depth: int) -> FloatArray:
         """``ask_q`` of the module doc for every node and available question, ``(n, Q, G)`` (``-inf`` where
         not available). Each answer is a child: yes and no by the tracker's Bayes update, and with the third
-        answer "other" by :meth:`.answers.ThirdAnswer.other_grasp`; each weighted for goal ``g`` by how likely a person with goal
-        ``g`` gives it. The children are deduplicated: a belief depends on the set of answers, not their
+        answer "other" by :meth:`.answers.ThirdAnswer.other_grasp`; each weighted for goal ``g`` by how
+        likely a person with goal ``g`` gives it. The children are deduplicated: a belief depends on the set of answers, not their
         order, so each (start, asked, answers) is decided once."""
         n, nq = avail.shape
         L = self.L_yes  # (Q, G)
