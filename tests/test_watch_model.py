@@ -6,6 +6,8 @@ recursion); ``test_when_to_ask.py`` pins the paper's behaviours.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -25,7 +27,7 @@ from sa_daemon.planner.node_keys import distinct_rows
 from sa_daemon.planner.rollouts import Rollouts
 from sa_daemon.planner.snapshot import Snapshot
 from sa_daemon.planner.solver import Solver
-from sa_daemon.planner.watch import WatchSearch
+from sa_daemon.planner.watch import MAX_BATCH, WatchSearch
 from sa_daemon.world.scene import load_scene
 
 SCENE = load_scene("scene1")
@@ -360,6 +362,42 @@ def test_a_continued_watch_equals_the_plain_recursion_on_random_problems(seed):
     _assert_the_reference_values(model, snap, values, watched, complete)
     one = WatchSearch(SharedAutonomyModel(_cfg(**{**cfg.planner.model_dump(), "watch_levels": 1})), snap).run()
     assert one[0] == values  # commits and questions: the root is not changed by its children's option
+
+
+def test_a_continued_watch_keeps_every_grandchild_s_questions_in_a_large_batch():
+    """Every goal a branch on Scene 2 (``watch_branches = "all"``), three answers: more grandchildren than
+    one question level of ``MAX_BATCH`` beliefs holds. They are decided in batches, so each may still ask,
+    as the plain recursion lets it (found by review: one batch cut their questions, session 41)."""
+    rng = np.random.default_rng(1005)
+    cfg = _cfg(horizon_s=4.0, rollout_step_s=0.5, watch_levels=2, max_questions=1, question_gate="none",
+               watch_s=1.5, watch_moves=2, top_goals=10, watch_branches="all", root_goals="top",
+               watch_evidence=0.3, watch_evidence_rotation=0.8, watch_copy_evidence=0.5)
+    reward = cfg.reward.model_copy(update={"question_time_s": float(rng.choice([0.5, 1.0]))})
+    cfg = cfg.model_copy(update={"reward": reward, "asking": cfg.asking.model_copy(update={"third_answer": True})})
+    model = SharedAutonomyModel(cfg)
+    scene = load_scene("scene2")
+    goals = model.initial_belief(scene.goals).goals
+    probs = rng.dirichlet(np.full(len(goals), 0.7)) + 1e-6
+    start = Pose(scene.start.position + rng.normal(0.0, 0.05, 3), scene.start.quat_wxyz)
+    snap = Snapshot(goals, probs, start, np.zeros(6), Mode.TRANSLATION, budget_s=None,
+                    user_speed=(float(rng.uniform(0.01, 0.1)), float(rng.uniform(0.05, 0.3))))
+    search = WatchSearch(model, snap)
+    values, watched, complete = search.run()
+    assert search.grandchildren * search.answers * len(search.questions) > MAX_BATCH  # the case under test
+    _assert_the_reference_values(model, snap, values, watched, complete)
+
+
+def test_a_continued_watch_past_the_deadline_leaves_the_watches_out():
+    """The continued watch is the search's largest stage: past the deadline it is not started, and the plan
+    is the commits' and the questions' (incomplete), as when the children's stage is dropped."""
+    model = SharedAutonomyModel(_cfg(watch_levels=2))
+    search = WatchSearch(model, _snap(), deadline=time.perf_counter() - 1.0)
+    search._out_of_budget = lambda: False  # the deadline passes between the children's stage and this one
+    values, watched, complete = search.run()
+    assert watched == {} and not complete and values
+    assert search.children > 0 and search.grandchildren == 0
+    on_time = WatchSearch(model, _snap())
+    assert on_time.run()[1] and on_time.grandchildren > 0
 
 
 @pytest.mark.parametrize("seed", range(3))

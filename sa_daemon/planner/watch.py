@@ -90,6 +90,10 @@ def _frozen(x: FloatArray) -> FloatArray:
     return out
 
 
+class _Late(Exception):
+    """The deadline passed before the continued watch's stage (:meth:`WatchSearch._continued`)."""
+
+
 CONTINUE = -1
 """``decide``'s choice where a child keeps its watched motion (``planner.watch_levels = 2``)."""
 
@@ -131,6 +135,8 @@ class WatchSearch:
         self.L_yes = yes_likelihood(self.questions, goals, p)
         self.third = ThirdAnswer.of(self.questions, goals, p) if cfg.asking.third_answer else None
         """The answers "yes", "no" and "that object, another grasp" (``asking.third_answer``), or ``None``."""
+        self.answers = 2 if self.third is None else 3
+        """Children a question has: one per answer."""
         self.gated = pc.question_gate == "information"
         pool = np.arange(len(self.b0)) if pc.watch_branches == "all" else cands
         self.branches = np.array([g for g in pool if self.b0[g] > 0], dtype=int)
@@ -211,7 +217,7 @@ class WatchSearch:
             act, best = np.where(keep, CONTINUE, act), np.where(keep, watch[1], best)
         avail = ~asked
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
-                or 2 * int(avail.sum()) > MAX_BATCH):
+                or self.answers * int(avail.sum()) > MAX_BATCH):
             return V, act
         if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
             if self.gated:  # no decision after the answer: no information worth anything
@@ -389,15 +395,22 @@ class WatchSearch:
         """Every child's watch continued (:mod:`.continued_watch`): its grandchildren, deduplicated like the
         children, rolled out over the ``n - 2 n_w`` steps left and decided (ask or commit), then what the
         continuation is worth, ``(vectors (n, G), values (n,))`` for :meth:`decide`'s ``watch``."""
+        if time.perf_counter() > self.deadline:  # the grandchildren are the search's largest stage
+            raise _Late
         share, copy = self.watch_share()
         pos, quat, B = grandchildren(kids.rollouts, kids.beliefs, kids.motions, self.branches,
                                      self.snap.goals.target_index, share, copy)
         first, kid = distinct_rows(np.concatenate((pos, quat, B), axis=1))
-        self.grandchildren = len(first)
+        self.grandchildren = m = len(first)
         steps = self.n - 2 * self.n_w
-        A = np.repeat(asked[:1], len(first), axis=0)
-        V, _ = self.decide(self.rollouts(pos[first], quat[first], B[first], steps), np.arange(len(first)), B[first],
-                           A, A.copy(), steps)
+        B = B[first]
+        G2 = self.rollouts(pos[first], quat[first], B, steps)
+        A = np.repeat(asked[:1], m, axis=0)
+        # decided in batches whose first question level fits MAX_BATCH, as one child's does: every grandchild
+        # may ask (the limit cuts deeper levels only)
+        size = max(1, MAX_BATCH // (self.answers * max(1, len(self.questions))))
+        V = np.concatenate([self.decide(G2, np.arange(i, min(i + size, m)), B[i:i + size], A[i:i + size],
+                                        A[i:i + size].copy(), steps)[0] for i in range(0, m, size)])
         return continued_vectors(kids.rollouts, kids.beliefs, kids.motions, self.branches, V[kid])
 
     # -- search ------------------------------------------------------------------------------------------
@@ -420,7 +433,10 @@ class WatchSearch:
         if self._out_of_budget():
             kids.rollouts.cancel()
             return values, {}, False
-        return values, self.watch_values(R, kids, asked), True
+        try:
+            return values, self.watch_values(R, kids, asked), True
+        except _Late:  # the deadline passed before a continued watch (planner.watch_levels = 2)
+            return values, {}, False
 
     def tree(self) -> WatchTree:
         """This snapshot's problem as plain data (:class:`~.watch_tree.WatchTree`), searched without a
