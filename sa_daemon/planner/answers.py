@@ -23,9 +23,8 @@ from ..world.goalset import GoalSet
 
 
 def in_target(questions: Sequence[Action], goals: GoalSet) -> np.ndarray:
-    """``(Q, G)``: goal ``g`` is in the target question ``q`` names."""
-    qi = np.array([goals.targets.index(q.target) for q in questions], dtype=int)
-    return (qi[:, None] == goals.target_index[None, :]).reshape(len(qi), len(goals))
+    """``(Q, G)``: goal ``g`` is in the target question ``q`` names (:meth:`GoalSet.target_mask`)."""
+    return np.array([goals.target_mask(q.target) for q in questions], dtype=bool).reshape(len(questions), len(goals))
 
 
 def yes_likelihood(questions: Sequence[Action], goals: GoalSet, p: float) -> FloatArray:

@@ -262,8 +262,8 @@ class WatchSearch:
         """``ask_q`` of the module doc for every node and available question, ``(n, Q, G)`` (``-inf`` where
         not available). Each answer is a child: yes and no by the tracker's Bayes update, and with the third
         answer "other" by :meth:`.answers.ThirdAnswer.other_grasp`; each weighted for goal ``g`` by how
-        likely a person with goal ``g`` gives it. The children are deduplicated: a belief depends on the set of answers, not their
-        order, so each (start, asked, answers) is decided once."""
+        likely a person with goal ``g`` gives it. The children are deduplicated: a belief depends on the set
+        of answers, not their order, so each (start, asked, answers) is decided once."""
         n, nq = avail.shape
         L = self.L_yes  # (Q, G)
         node, q = np.nonzero(avail)
