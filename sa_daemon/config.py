@@ -235,6 +235,12 @@ class PlannerConfig(_Section):
         "terminal_s; approach: the return of finishing the approach at the assisted speed, goal bonus "
         "included (model.reward.approach_return; docs/model.md)",
     )
+    switch_margin: float = Field(
+        0.0, ge=0, le=1000,
+        description="the adopted motion (a move, HO or no-assist) is kept while the new plan's motion beats it by "
+        "less than this (reward units): the arm's direction does not flip on near ties; questions are not held "
+        "back; 0 = every plan free (the paper) (session 42, docs/model.md)",
+    )
     watch_s: float = Field(1.0, gt=0, le=5, description="watch model: how long a motion runs before deciding again (s)")
     watch_levels: int = Field(
         1, ge=0, le=2,

@@ -5,6 +5,7 @@
     [joystick]   # axes (mapping), signs (inversion), deadzone, gains, centre/low/high (calibrate), button_*
     [input]      # filter_hz: the tremor filter
     [blend]      # alpha: the assistance level, 0.2-0.8 in a profile
+    [planner]    # switch_margin: a steadier arm (fewer changes of the assistance's mind on near ties)
     [speech]     # voice, rate_wpm, volume of the questions
     [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s, learn_answer_time
     [reward]     # question_time_s: how long this person's questions stop the arm (s), what the planner charges
@@ -31,6 +32,7 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
                            "button_other"}),
     "input": frozenset({"filter_hz"}),
     "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share"}),
+    "planner": frozenset({"switch_margin"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
     "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s",
                           "withdraw_no_s", "learn_answer_time"}),

@@ -363,6 +363,38 @@ def test_move_expires_two_planner_periods_after_acceptance():
     np.testing.assert_array_equal(tick.command.total_twist, ctl.user_twist)
 
 
+@pytest.mark.parametrize("margin", [0.0, 20.0])
+def test_switch_margin_keeps_the_motion_on_near_ties_only(margin):
+    """With ``planner.switch_margin`` the adopted motion stays while the new plan's motion beats it by less
+    than the margin (in the new plan's own values); a larger lead, a question or an expired plan are not
+    held back. With 0 (the paper) every plan is adopted as it comes."""
+    ctl = make_ctl(cfg=config_from_dict({"planner": {"switch_margin": margin}}))
+    t = 1.0
+    feed(ctl, toward(TARGET), t)
+    snap = ctl.snapshot(START, None)
+    move = move_to(snap.goals, TARGET)
+
+    def plan(best: Action, lead: float, at: float) -> PlanResult:
+        values = {best: -100.0, move: -100.0 - lead, NO_ASSIST: -500.0}
+        return PlanResult(best, -100.0, -100.0, 1, 1, 0.0, True, values)
+
+    ctl.accept_plan(snap, plan(move, 0.0, t), t)
+    ctl.accept_plan(snap, plan(HO_ACTION, 15.0, t + 0.1), t + 0.1)
+    assert ctl.plan.action == (move if margin else HO_ACTION)
+    ctl.accept_plan(snap, plan(HO_ACTION, 25.0, t + 0.2), t + 0.2)
+    assert ctl.plan.action == HO_ACTION  # a lead above the margin switches
+
+    ctl.accept_plan(snap, plan(move, 0.0, t + 0.3), t + 0.3)
+    late = t + 0.3 + 2 * CFG.planner.period_s + 0.01  # the move expired: nothing to hold
+    ctl.accept_plan(snap, plan(HO_ACTION, 1.0, late), late)
+    assert ctl.plan.action == HO_ACTION
+
+    ctl.accept_plan(snap, plan(move, 0.0, late + 0.1), late + 0.1)
+    q = ctl.accept_plan(snap, PlanResult(ask(TARGET), -99.0, -99.0, 1, 1, 0.0, True,
+                                         {ask(TARGET): -99.0, move: -100.0}), late + 0.2)
+    assert q is not None and q.target == TARGET  # a question is never held back
+
+
 def test_plan_for_another_method_is_moot():
     """After ``set_method`` a plan computed for the old method is ignored (move or question)."""
     ctl = make_ctl("policy")

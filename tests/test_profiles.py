@@ -50,6 +50,9 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     # A person who wants to fine-tune alone (section VI-E.4): the yield switches are theirs to set.
     fine = parse_profile({"name": "sam", "blend": {"yield_near_m": 0.05, "opposition_window_s": 1.0}}, "sam.toml")
     assert (fine.apply(Config()).blend.yield_near_m, fine.apply(Config()).blend.opposition_window_s) == (0.05, 1.0)
+    steady = parse_profile({"name": "ana", "planner": {"switch_margin": 50.0}}, "ana.toml").apply(Config())
+    assert steady.planner.switch_margin == 50.0  # a steadier arm (docs/profiles.md)
+    assert steady.planner.model_dump() | {"switch_margin": 0.0} == Config().planner.model_dump()
     assert p.keys() == ["asking.answer_sources", "asking.max_per_task", "blend.alpha", "input.filter_hz",
                         "joystick.deadzone", "joystick.gains", "speech.rate_wpm", "speech.voice"]
 
@@ -57,7 +60,9 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
 @pytest.mark.parametrize("data, key", [
     ({"name": "a", "blend": {"alpha": 0.9}}, "blend.alpha"),  # outside the safe range 0.2-0.8
     ({"name": "a", "blend": {"alpha": 0.1}}, "blend.alpha"),
-    ({"name": "a", "planner": {"horizon_s": 1}}, "planner"),  # not a profile section
+    ({"name": "a", "planner": {"horizon_s": 1}}, "planner.horizon_s"),  # the planner's model is not a person's
+    ({"name": "a", "planner": {"switch_margin": -1}}, "switch_margin"),
+    ({"name": "a", "model": {"alpha": 0.5}}, "model"),  # not a profile section
     ({"name": "a", "speech": {"enabled": False}}, "speech.enabled"),  # not a profile key
     ({"name": "a", "joystick": {"gains": [5, 1, 1]}}, "gains"),
     ({"name": "a", "joystick": {"signs": [1, 0.5, 1]}}, "signs"),

@@ -309,8 +309,19 @@ class Controller:
         action = result.action
         if action.kind is ActionKind.QUESTION:
             return self.ask(str(action.target), t)
+        action = self._held(snap, result, action, t)
         self._plan = Plan(action, snap.goals, t + 2 * self._cfg.planner.period_s)
         return None
+
+    def _held(self, snap: Snapshot, result: PlanResult, action: Action, t: float) -> Action:
+        """``action``, or the adopted motion when it is still valid, was planned on the same goals and
+        the new plan values ``action`` less than ``planner.switch_margin`` above it."""
+        margin = self._cfg.planner.switch_margin
+        held = self._plan.action
+        if (margin <= 0.0 or held == action or t > self._plan.until or self._plan.goals is not snap.goals
+                or held not in result.root_values):
+            return action
+        return held if result.root_values[action] - result.root_values[held] < margin else action
 
     def adopt_fixed(self) -> None:
         """A rule-based method's action for the current belief (``manual``, ``ho``, ``blend``, ...), valid

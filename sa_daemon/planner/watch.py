@@ -94,10 +94,6 @@ class _Late(Exception):
     """The deadline passed before the continued watch's stage (:meth:`WatchSearch._continued`)."""
 
 
-CONTINUE = -1
-"""``decide``'s choice where a child keeps its watched motion (``planner.watch_levels = 2``)."""
-
-
 @dataclass(frozen=True)
 class _Children:
     """The distinct children of the watched motions: their rollouts (maybe still running), beliefs
@@ -185,13 +181,12 @@ class WatchSearch:
         return time.perf_counter() > self.deadline or (self.node_budget is not None and self.nodes >= self.node_budget)
 
     def decide(self, R: Rollouts, c: np.ndarray, B: FloatArray, asked: np.ndarray, yes: np.ndarray, steps: int,
-               depth: int = 0, watch: tuple[FloatArray, FloatArray] | None = None) -> tuple[FloatArray, np.ndarray]:
+               depth: int = 0, watch: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
         """``D`` for a batch: the tracker at beliefs ``B`` ``(n, G)``, at start poses ``c`` ``(n,)`` of ``R``
         with ``steps`` left, after the answers ``yes`` ``(n, Q)`` to the questions ``asked`` ``(n, Q)``,
-        picks the action best by its belief. Returns what that choice is worth *if the goal is g*,
-        ``(n, G)``, and the choice: ``0..A-1`` a commit (``self.moves``), ``A + q`` question ``q``,
-        :data:`CONTINUE` the watch continued, where ``watch`` gives each node that option (its vectors
-        ``(n, G)`` and the values the tracker weighs them by ``(n,)``, :meth:`_continued`)."""
+        picks the action best by its belief: a commit, a question, or where ``watch`` gives a node that
+        option, the watch continued (its vectors ``(n, G)`` and the values the tracker weighs them by
+        ``(n,)``, :meth:`_continued`). Returns what that choice is worth *if the goal is g*, ``(n, G)``."""
         self.nodes += len(B)
         n = len(B)
         rows = np.arange(n)
@@ -210,24 +205,23 @@ class WatchSearch:
             act = E.argmax(axis=1)
             V, best = M[c, :, act], E[rows, act]
         else:
-            act, V, best = np.zeros(n, dtype=int), np.full(B.shape, -np.inf), np.full(n, -np.inf)
+            V, best = np.full(B.shape, -np.inf), np.full(n, -np.inf)
         if watch is not None:
             keep = watch[1] > best
             V = np.where(keep[:, None], watch[0], V)
-            act, best = np.where(keep, CONTINUE, act), np.where(keep, watch[1], best)
+            best = np.where(keep, watch[1], best)
         avail = ~asked
         if (not self.questions or depth >= self.max_q or steps < self.n_q or not avail.any()
                 or self.answers * int(avail.sum()) > MAX_BATCH):
-            return V, act
+            return V
         if steps == self.n_q:  # no time left after the answer: every question is worth the same (the first)
             if self.gated:  # no decision after the answer: no information worth anything
-                return V, act
+                return V
             w = self._ask_last(R, c)
             self._note_askable(R, steps, asked, yes, avail)
             eq = np.einsum("ng,ng->n", B, w)
-            q = avail.argmax(axis=1)
             better = avail.any(axis=1) & (eq > best)
-            return np.where(better[:, None], w, V), np.where(better, len(self.moves) + q, act)
+            return np.where(better[:, None], w, V)
         Vq = self.question_vectors(R, c, B, asked, yes, avail, steps, depth)
         if self.gated:  # a closed question is -inf throughout (0 x -inf would be nan in the product)
             avail = avail & np.isfinite(Vq[..., 0])
@@ -235,9 +229,7 @@ class WatchSearch:
         eq = np.where(avail, np.einsum("ng,nqg->nq", B, np.where(avail[..., None], Vq, 0.0)), -np.inf)
         q = eq.argmax(axis=1)
         better = eq[rows, q] > best
-        V = np.where(better[:, None], Vq[rows, q], V)
-        act = np.where(better, len(self.moves) + q, act)
-        return V, act
+        return np.where(better[:, None], Vq[rows, q], V)
 
     def _note_askable(self, R: Rollouts, steps: int, asked: np.ndarray, yes: np.ndarray, avail: np.ndarray) -> None:
         """While :meth:`tree` searches: note the questions each node of the root's question tree may ask. The
@@ -291,7 +283,7 @@ class WatchSearch:
         keys = answer_keys(kid_c, kid_a, kid_y)
         _, first, inverse = np.unique(keys, axis=0 if keys.ndim > 1 else None, return_index=True,
                                       return_inverse=True)  # (axis=0 on 1-D keys: the same, slower)
-        v, _ = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
+        v = self.decide(R, kid_c[first], kid_B[first], kid_a[first], kid_y[first], steps - self.n_q, depth + 1)
         v = v[inverse.ravel()]
         k = len(node)
         informed = np.zeros_like(total)
@@ -299,7 +291,7 @@ class WatchSearch:
             informed = informed + like * v[i * k:(i + 1) * k]
         Vq[node, q] = total + informed
         if self.gated:  # only a question whose answers are worth more than its cost (module doc)
-            unasked, _ = self.decide(R, c, B, asked, yes, steps - self.n_q, depth + 1)
+            unasked = self.decide(R, c, B, asked, yes, steps - self.n_q, depth + 1)
             closed = np.einsum("kg,kg->k", Bn, informed - unasked[node]) <= -self.cfg.reward.question
             Vq[node[closed], q[closed]] = -np.inf
         return Vq
@@ -373,7 +365,7 @@ class WatchSearch:
         n = len(kids.beliefs)
         A = np.repeat(asked, n, axis=0)
         watch = self._continued(kids, A) if self.continues else None
-        V, _ = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w, watch=watch)
+        V = self.decide(kids.rollouts, np.arange(n), kids.beliefs, A, A.copy(), self.n - self.n_w, watch=watch)
         g, ws = self.branches, self.watched
         kid = kids.of_branch.reshape(len(ws), len(g))  # each (motion, branch)'s child, rows of V
         out = {}
@@ -410,7 +402,7 @@ class WatchSearch:
         # may ask (the limit cuts deeper levels only)
         size = max(1, MAX_BATCH // (self.answers * max(1, len(self.questions))))
         V = np.concatenate([self.decide(G2, np.arange(i, min(i + size, m)), B[i:i + size], A[i:i + size],
-                                        A[i:i + size].copy(), steps)[0] for i in range(0, m, size)])
+                                        A[i:i + size].copy(), steps) for i in range(0, m, size)])
         return continued_vectors(kids.rollouts, kids.beliefs, kids.motions, self.branches, V[kid])
 
     # -- search ------------------------------------------------------------------------------------------
