@@ -5,7 +5,7 @@ seeds, arm, configuration) with the current code, and print each summary row old
 
 Without ``--write`` nothing is changed: the old and new summaries are only compared. With it, each file is
 rewritten (trials, summary, and ``meta.config`` as the current code spells it). Files that are not
-evaluations (bench figures) are skipped.
+evaluations (bench figures) and files a results script wrote (``meta.script``) are skipped.
 """
 
 from __future__ import annotations
@@ -95,6 +95,8 @@ def _fmt(row: dict | None) -> str:
 def rerun(path: Path, jobs: int, write: bool) -> None:
     data = json.loads(path.read_text())
     meta = data.get("meta", {})
+    if "script" in meta:  # written by a results script, not by sa-daemon eval: that script runs it again
+        return
     parts = meta.get("parts") or ([{"scene": meta["scene"], "tasks": meta["tasks"], "methods": meta["methods"]}]
                                   if "tasks" in meta and "methods" in meta else [])
     if not parts:

@@ -14,7 +14,7 @@ must also lift the task's object after closing for the trial to succeed.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -182,9 +182,12 @@ def run_trial(
     pose_choice: str | None = None,
     user_name: str = "calibrated",
     on_plan: Callable[[float, Snapshot, PlanResult], None] | None = None,
+    pose_known: bool = False,
 ) -> TrialResult:
     """Run one trial of ``task`` (``"object:grasp_type"``) with ``method``; deterministic per ``seed``.
-    ``on_plan(t, snapshot, result)`` sees every plan, ``t`` the trial's time in s."""
+    ``on_plan(t, snapshot, result)`` sees every plan, ``t`` the trial's time in s. ``pose_known`` is an
+    oracle for measuring, never the product's: the controller's goal for ``task`` holds the user's own
+    grasp pose alone, so the low-level target is known (the same seed draws the same user)."""
     rng = np.random.default_rng(seed)
     arm = arm_factory(scene, cfg)
     if arm.kinematics is not None:  # an arm with joints: only the poses it can reach (arm/reach.py)
@@ -193,7 +196,10 @@ def run_trial(
     dt = 1.0 / cfg.eval.control_hz
     want = desired_pose(goal, scene.start, cfg, rng, pose_choice, scene_object(scene, goal.object))
     user = SimulatedUser(task, want, cfg.sim_user, cfg.input, rng, dt)
-    ctl = Controller(cfg, scene.goals, method, dt, arm.kinematics)
+    goals = scene.goals
+    if pose_known:
+        goals = tuple(replace(g, poses=(want,)) if g.target == goal.target else g for g in goals)
+    ctl = Controller(cfg, goals, method, dt, arm.kinematics)
     solver = Solver(ctl.model)
     plan_every = max(1, round(cfg.planner.period_s / dt))
     n_steps = int(np.ceil(cfg.sim_user.timeout_s / dt))
