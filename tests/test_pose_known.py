@@ -1,6 +1,7 @@
 """``run_trial(..., pose_known=True)``, the oracle ``docs/results/pose_known.py`` measures with: the
 controller's goal for the task holds the user's own grasp pose alone, every other goal keeps its list, and
-the seed draws the same user; with the pose known, an own-pose user's trial is faster."""
+the seed draws the same user; with the pose known, an own-pose user's trial is faster. And
+``docs/results/pose_posterior.py``, which follows the tracker's posterior over the user's pose."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from sa_daemon.sim.users import load_user
 from sa_daemon.world.scene import load_scene
 
 SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "results" / "pose_known.py"
+POSTERIOR = SCRIPT.with_name("pose_posterior.py")
 SCENE = load_scene("scene1")
 TASK = "cup:top"
 
@@ -66,3 +68,18 @@ def test_the_script_prints_the_paired_table(tmp_path):
     assert sorted((t["method"], t["pose_known"]) for t in trials) == [("ho", False), ("ho", True),
                                                                        ("policy", False), ("policy", True)]
     assert set(mod.paired(trials, True)) == {(TASK, "own-pose")}
+
+
+def test_the_pose_posterior_script_follows_the_users_pose_to_the_close():
+    spec = importlib.util.spec_from_file_location("results_pose_posterior", POSTERIOR)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows, result = mod.posterior_rows("scene1", "chips can:side", "calibrated", 0, "tracked")
+    assert result.success and rows
+    assert all(0.0 <= r[1] <= 1.0 + 1e-9 and r[2] >= 0.0 for r in rows)
+    assert rows[-1][3] < rows[0][3]  # the gripper ends nearer the user's pose than it starts
+    run = subprocess.run([sys.executable, str(POSTERIOR), "--scene", "scene1", "--task", "chips can:side",
+                          "--user", "calibrated", "--seed", "0", "--every", "2"],
+                         capture_output=True, text=True, timeout=600, check=True)
+    assert run.stdout.splitlines()[0].startswith("t=  0.0 s  user's pose ")
+    assert run.stdout.splitlines()[-1].startswith("success at ")

@@ -1,0 +1,78 @@
+"""Where the tracker's posterior over the grasp poses of the true target stands, plan by plan, in one trial.
+
+    python docs/results/pose_posterior.py --scene scene1 --task cup:top --user own-pose --seed 300 \\
+        [--reach tracked] [--every 1.0]
+
+Runs the trial as ``sa-daemon eval`` does (the policy, kinematic arm, the user's profile over the built-in
+defaults, ``intent.reach_pose`` as given; ``tracked`` by default, so the belief keeps each goal's posterior
+over its poses) and prints, about every ``--every`` s: the posterior share of the pose the simulated user
+wants among all the task target's poses (each goal's probability times its posterior over its own poses;
+a pose listed twice, e.g. at two yaws a half-turn apart, counts once per listing), how far the
+likeliest pose is from it (cm), how far the gripper is from it (cm), the action chosen and the mode.
+``docs/results.md`` ("Session 42") used it on the own-pose user's Table I trial.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from sa_daemon.config import config_from_dict
+from sa_daemon.sim.episode import desired_pose, run_trial
+from sa_daemon.sim.success import scene_object
+from sa_daemon.sim.users import load_user
+from sa_daemon.world.scene import load_scene
+
+SAME_M = 1e-6
+"""Listed poses closer than this (m) to the user's are the user's."""
+
+
+def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str) -> tuple[list[tuple], object]:
+    """``(t, share of the user's pose, likeliest pose's distance to it (m), gripper's distance to it (m),
+    action label, mode)`` at every plan, and the trial's result."""
+    scene = load_scene(scene_name)
+    cfg = load_user(user).apply(config_from_dict({"intent": {"reach_pose": reach}}))
+    goal = scene.goal(task)
+    # the pose the trial's user wants: drawn first from the seed's generator, as run_trial draws it
+    want = desired_pose(goal, scene.start, cfg, np.random.default_rng(seed), None,
+                        scene_object(scene, goal.object)).position
+    rows: list[tuple] = []
+
+    def on_plan(t: float, snap, result) -> None:
+        if snap.pose_log_w is None:
+            return
+        weighted = [(snap.probs[g] * np.exp(snap.pose_log_w[g, k]), p.position)
+                    for g in np.flatnonzero(snap.goals.target_mask(task))
+                    for k, p in enumerate(snap.goals.goals[g].poses)]
+        total = sum(w for w, _ in weighted)
+        share = sum(w for w, x in weighted if np.linalg.norm(x - want) < SAME_M) / total
+        likeliest = max(weighted, key=lambda wx: wx[0])[1]
+        rows.append((t, share, float(np.linalg.norm(likeliest - want)),
+                     float(np.linalg.norm(snap.pose.position - want)), result.action.label, snap.mode.value))
+
+    result = run_trial(scene, task, "policy", seed, cfg, user_name=user, on_plan=on_plan)
+    return rows, result
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--task", required=True)
+    ap.add_argument("--user", default="own-pose")
+    ap.add_argument("--seed", type=int, default=300)
+    ap.add_argument("--reach", default="tracked", choices=("tracked", "tracked_moves"))
+    ap.add_argument("--every", type=float, default=1.0, help="print a plan about this often (s)")
+    a = ap.parse_args()
+    rows, result = posterior_rows(a.scene, a.task, a.user, a.seed, a.reach)
+    due = 0.0
+    for t, share, d_likeliest, d_gripper, action, mode in rows:
+        if t + 1e-9 >= due:
+            print(f"t={t:5.1f} s  user's pose {share:.2f}  likeliest {100 * d_likeliest:4.1f} cm from it  "
+                  f"gripper {100 * d_gripper:5.1f} cm  {action} ({mode})")
+            due = t + a.every
+    print(f"{'success' if result.success else 'failure'} at {result.completion_time_s:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
