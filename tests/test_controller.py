@@ -390,6 +390,9 @@ def test_switch_margin_keeps_the_motion_on_near_ties_only(margin):
     assert ctl.plan.action == HO_ACTION
 
     ctl.accept_plan(snap, plan(move, 0.0, late + 0.1), late + 0.1)
+    ctl.accept_plan(snap, PlanResult(HO_ACTION, -99.0, -99.0, 1, 1, 0.0, True, {move: -100.0}), late + 0.15)
+    assert ctl.plan.action == HO_ACTION  # a plan that does not value both motions holds nothing
+    ctl.accept_plan(snap, plan(move, 0.0, late + 0.17), late + 0.17)
     q = ctl.accept_plan(snap, PlanResult(ask(TARGET), -99.0, -99.0, 1, 1, 0.0, True,
                                          {ask(TARGET): -99.0, move: -100.0}), late + 0.2)
     assert q is not None and q.target == TARGET  # a question is never held back

@@ -317,11 +317,11 @@ class Controller:
         """``action``, or the adopted motion when it is still valid, was planned on the same goals and
         the new plan values ``action`` less than ``planner.switch_margin`` above it."""
         margin = self._cfg.planner.switch_margin
-        held = self._plan.action
+        held, values = self._plan.action, result.root_values
         if (margin <= 0.0 or held == action or t > self._plan.until or self._plan.goals is not snap.goals
-                or held not in result.root_values):
+                or held not in values or action not in values):  # a plan without both values holds nothing
             return action
-        return held if result.root_values[action] - result.root_values[held] < margin else action
+        return held if values[action] - values[held] < margin else action
 
     def adopt_fixed(self) -> None:
         """A rule-based method's action for the current belief (``manual``, ``ho``, ``blend``, ...), valid
