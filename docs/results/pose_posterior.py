@@ -8,7 +8,9 @@ defaults, ``intent.reach_pose`` as given; ``tracked`` by default, so the belief 
 over its poses) and prints, about every ``--every`` s: the posterior share of the pose the simulated user
 wants among all the task target's poses (each goal's probability times its posterior over its own poses;
 a pose listed twice, e.g. at two yaws a half-turn apart, counts once per listing), how far the
-likeliest pose is from it (cm), how far the gripper is from it (cm), the action chosen and the mode.
+likeliest pose is from it (cm), how far the gripper is from it (cm), the action chosen, the mode, and
+how many resamplings (section III-G: a new goal set) happened since the row before. Under the default
+``intent.copy_weights = "poses"`` a resampling starts each copy's posterior over its poses afresh.
 ``docs/results.md`` ("Session 42") used it on the own-pose user's Table I trial.
 """
 
@@ -30,7 +32,7 @@ SAME_M = 1e-6
 
 def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str) -> tuple[list[tuple], object]:
     """``(t, share of the user's pose, likeliest pose's distance to it (m), gripper's distance to it (m),
-    action label, mode)`` at every plan, and the trial's result."""
+    action label, mode, goal set)`` at every plan, and the trial's result."""
     scene = load_scene(scene_name)
     cfg = load_user(user).apply(config_from_dict({"intent": {"reach_pose": reach}}))
     goal = scene.goal(task)
@@ -49,7 +51,8 @@ def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str)
         share = sum(w for w, x in weighted if np.linalg.norm(x - want) < SAME_M) / total
         likeliest = max(weighted, key=lambda wx: wx[0])[1]
         rows.append((t, share, float(np.linalg.norm(likeliest - want)),
-                     float(np.linalg.norm(snap.pose.position - want)), result.action.label, snap.mode.value))
+                     float(np.linalg.norm(snap.pose.position - want)), result.action.label, snap.mode.value,
+                     snap.goals))
 
     result = run_trial(scene, task, "policy", seed, cfg, user_name=user, on_plan=on_plan)
     return rows, result
@@ -65,12 +68,15 @@ def main() -> None:
     ap.add_argument("--every", type=float, default=1.0, help="print a plan about this often (s)")
     a = ap.parse_args()
     rows, result = posterior_rows(a.scene, a.task, a.user, a.seed, a.reach)
-    due = 0.0
-    for t, share, d_likeliest, d_gripper, action, mode in rows:
+    due, resampled, goals = 0.0, 0, rows[0][6] if rows else None
+    for t, share, d_likeliest, d_gripper, action, mode, now in rows:
+        resampled += now is not goals
+        goals = now
         if t + 1e-9 >= due:
             print(f"t={t:5.1f} s  user's pose {share:.2f}  likeliest {100 * d_likeliest:4.1f} cm from it  "
-                  f"gripper {100 * d_gripper:5.1f} cm  {action} ({mode})")
-            due = t + a.every
+                  f"gripper {100 * d_gripper:5.1f} cm  {action} ({mode})"
+                  + (f"  [{resampled} resampling{'s' if resampled > 1 else ''}]" if resampled else ""))
+            due, resampled = t + a.every, 0
     print(f"{'success' if result.success else 'failure'} at {result.completion_time_s:.2f} s")
 
 
