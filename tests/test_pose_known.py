@@ -74,7 +74,8 @@ def test_the_pose_posterior_script_follows_the_users_pose_to_the_close():
     spec = importlib.util.spec_from_file_location("results_pose_posterior", POSTERIOR)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    rows, result = mod.posterior_rows("scene1", "chips can:side", "calibrated", 0, "tracked")
+    rows, result, lines = mod.posterior_rows("scene1", "chips can:side", "calibrated", 0, "tracked", (1.0,))
+    assert lines[0].startswith("t=1.0 s") and 2 <= len(lines) <= 7  # the likeliest poses at 1 s
     assert result.success and rows
     assert all(0.0 <= r[1] <= 1.0 + 1e-9 and r[2] >= 0.0 for r in rows)
     assert rows[-1][3] < rows[0][3]  # the gripper ends nearer the user's pose than it starts

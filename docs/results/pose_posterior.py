@@ -1,7 +1,7 @@
 """Where the tracker's posterior over the grasp poses of the true target stands, plan by plan, in one trial.
 
     python docs/results/pose_posterior.py --scene scene1 --task cup:top --user own-pose --seed 300 \\
-        [--reach tracked] [--every 1.0]
+        [--reach tracked] [--every 1.0] [--at 18 ...]
 
 Runs the trial as ``sa-daemon eval`` does (the policy, kinematic arm, the user's profile over the built-in
 defaults, ``intent.reach_pose`` as given; ``tracked`` by default, so the belief keeps each goal's posterior
@@ -10,7 +10,9 @@ wants among all the task target's poses (each goal's probability times its poste
 a pose listed twice, e.g. at two yaws a half-turn apart, counts once per listing), how far the
 likeliest pose is from it (cm), how far the gripper is from it (cm), the action chosen, the mode, and
 how many resamplings (section III-G: a new goal set) happened since the row before. Under the default
-``intent.copy_weights = "poses"`` a resampling starts each copy's posterior over its poses afresh.
+``intent.copy_weights = "poses"`` a resampling starts each copy's posterior over its poses afresh. At
+each ``--at`` time (the first plan at or after it) it lists the six likeliest poses: share, offset from
+the user's pose (cm, degrees) and from the gripper.
 ``docs/results.md`` ("Session 42") used it on the own-pose user's Table I trial.
 """
 
@@ -21,6 +23,7 @@ import argparse
 import numpy as np
 
 from sa_daemon.config import config_from_dict
+from sa_daemon.geometry import quat_angle
 from sa_daemon.sim.episode import desired_pose, run_trial
 from sa_daemon.sim.success import scene_object
 from sa_daemon.sim.users import load_user
@@ -30,32 +33,46 @@ SAME_M = 1e-6
 """Listed poses closer than this (m) to the user's are the user's."""
 
 
-def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str) -> tuple[list[tuple], object]:
+def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str,
+                   at: tuple[float, ...] = ()) -> tuple[list[tuple], object, list[str]]:
     """``(t, share of the user's pose, likeliest pose's distance to it (m), gripper's distance to it (m),
-    action label, mode, goal set)`` at every plan, and the trial's result."""
+    action label, mode, goal set)`` at every plan, the trial's result, and the lines listing the poses at
+    the ``at`` times."""
     scene = load_scene(scene_name)
     cfg = load_user(user).apply(config_from_dict({"intent": {"reach_pose": reach}}))
     goal = scene.goal(task)
     # the pose the trial's user wants: drawn first from the seed's generator, as run_trial draws it
-    want = desired_pose(goal, scene.start, cfg, np.random.default_rng(seed), None,
-                        scene_object(scene, goal.object)).position
+    want_pose = desired_pose(goal, scene.start, cfg, np.random.default_rng(seed), None,
+                             scene_object(scene, goal.object))
+    want = want_pose.position
     rows: list[tuple] = []
+    lines: list[str] = []
+    due = sorted(at)
 
     def on_plan(t: float, snap, result) -> None:
         if snap.pose_log_w is None:
             return
-        weighted = [(snap.probs[g] * np.exp(snap.pose_log_w[g, k]), p.position)
-                    for g in np.flatnonzero(snap.goals.target_mask(task))
-                    for k, p in enumerate(snap.goals.goals[g].poses)]
+        poses = [(snap.probs[g] * np.exp(snap.pose_log_w[g, k]), p)
+                 for g in np.flatnonzero(snap.goals.target_mask(task))
+                 for k, p in enumerate(snap.goals.goals[g].poses)]
+        weighted = [(w, p.position) for w, p in poses]
         total = sum(w for w, _ in weighted)
         share = sum(w for w, x in weighted if np.linalg.norm(x - want) < SAME_M) / total
         likeliest = max(weighted, key=lambda wx: wx[0])[1]
+        if due and t + 1e-9 >= due[0]:
+            due.pop(0)
+            lines.append(f"t={t:.1f} s: the six likeliest of the target's poses")
+            for w, p in sorted(poses, key=lambda wp: -wp[0])[:6]:
+                lines.append(f"  share {w / total:.2f}  from the user's pose {100 * np.linalg.norm(p.position - want):4.1f} cm "
+                             f"{np.degrees(quat_angle(p.quat_wxyz, want_pose.quat_wxyz)):4.0f} deg, from the gripper "
+                             f"{100 * np.linalg.norm(p.position - snap.pose.position):4.1f} cm "
+                             f"{np.degrees(quat_angle(p.quat_wxyz, snap.pose.quat_wxyz)):4.0f} deg")
         rows.append((t, share, float(np.linalg.norm(likeliest - want)),
                      float(np.linalg.norm(snap.pose.position - want)), result.action.label, snap.mode.value,
                      snap.goals))
 
     result = run_trial(scene, task, "policy", seed, cfg, user_name=user, on_plan=on_plan)
-    return rows, result
+    return rows, result, lines
 
 
 def main() -> None:
@@ -66,8 +83,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=300)
     ap.add_argument("--reach", default="tracked", choices=("tracked", "tracked_moves"))
     ap.add_argument("--every", type=float, default=1.0, help="print a plan about this often (s)")
+    ap.add_argument("--at", type=float, action="append", default=[], help="list the likeliest poses here (s)")
     a = ap.parse_args()
-    rows, result = posterior_rows(a.scene, a.task, a.user, a.seed, a.reach)
+    rows, result, lines = posterior_rows(a.scene, a.task, a.user, a.seed, a.reach, tuple(a.at))
     due, resampled, goals = 0.0, 0, rows[0][6] if rows else None
     for t, share, d_likeliest, d_gripper, action, mode, now in rows:
         resampled += now is not goals
@@ -78,6 +96,7 @@ def main() -> None:
                   + (f"  [{resampled} resampling{'s' if resampled > 1 else ''}]" if resampled else ""))
             due, resampled = t + a.every, 0
     print(f"{'success' if result.success else 'failure'} at {result.completion_time_s:.2f} s")
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":
