@@ -96,7 +96,8 @@ def main() -> None:
                   + (f"  [{resampled} resampling{'s' if resampled > 1 else ''}]" if resampled else ""))
             due, resampled = t + a.every, 0
     print(f"{'success' if result.success else 'failure'} at {result.completion_time_s:.2f} s")
-    print("\n".join(lines))
+    for line in lines:
+        print(line)
 
 
 if __name__ == "__main__":
