@@ -110,6 +110,13 @@ class IntentConfig(_Section):
         "the target's posterior over its grasp poses from the input since the last resampling, so a split "
         "keeps what the input said about the pose (docs/model.md)",
     )
+    keep_pose_posterior: bool = Field(
+        False,
+        description="a resampling keeps, for each copy it makes, the target's posterior over the copy's own grasp "
+        "poses from the input so far (with copy_weights equal or poses the copies' probabilities are as those "
+        "say; input keeps it already); false = each copy's pose weights start afresh. Read where the pose "
+        "posterior is (reach_pose tracked or tracked_moves, poses tracked; session 42, docs/results.md)",
+    )
 
     @property
     def rotation_scale(self) -> float:

@@ -890,3 +890,29 @@ def test_copies_weighted_by_the_input_keep_what_it_said_about_the_pose():
             assert np.allclose(np.exp(own).max(axis=1), 1.0)
     assert shares["equal"] == pytest.approx(1 / 3)
     assert shares["input"] > 0.5
+
+
+def test_keep_pose_posterior_carries_each_copys_posterior_over_its_poses_through_a_resampling():
+    """``intent.keep_pose_posterior``: a resampling keeps, inside each copy it makes, what the input said
+    about the copy's poses (the target's posterior restricted to them); the copies' probabilities stay as
+    ``copy_weights`` gives them. Without it each copy's pose weights start afresh."""
+    gs = GoalSet((top_goal("a", offset(dx=-0.06), offset(dy=0.07), offset(dy=-0.09), offset(dz=-0.11)),
+                  top_goal("b", offset(dx=0.15)), top_goal("c", offset(dz=0.15)), top_goal("d", offset(dx=0.15, dz=0.1))))
+    u = np.array([0.0, 0.0, -0.1, 0.0, 0.0, 0.0])  # toward a's farthest pose (-z), away from every other goal
+    far = offset(dz=-0.11)
+    out = {}
+    for keep in (False, True):
+        cfg = MARGINAL.model_copy(update={"reach_pose": "tracked", "keep_pose_posterior": keep})
+        b = Belief.uniform(gs)
+        for _ in range(20):  # a at about 2/3: three copies, the far pose in the last with the next farthest
+            b = b.after_input(GRIPPER, u, cfg)
+        r = b.resampled(GRIPPER, cfg)
+        assert r is not b
+        i = next(i for i, g in enumerate(r.goals.goals)
+                 if any(np.allclose(p.position, far) for p in g.poses))
+        k = next(k for k, p in enumerate(r.goals.goals[i].poses) if np.allclose(p.position, far))
+        assert len(r.goals.goals[i].poses) > 1, "the far pose shares its copy with another"
+        w = np.exp(r.pose_weights()[i, :len(r.goals.goals[i].poses)])
+        out[keep] = (w[k] / w.sum(), r.probs.copy())
+    assert out[True][0] > 0.9 and out[True][0] > out[False][0] + 0.2
+    np.testing.assert_allclose(out[True][1], out[False][1], atol=1e-12)  # the copies' probabilities alike

@@ -276,7 +276,8 @@ class Belief:
         tp = self.target_probabilities()
         alloc = self.copy_allocation()
         pools = self._pose_pools()
-        posterior = self._pose_pool_posteriors() if cfg.copy_weights == "input" else None
+        keep = cfg.copy_weights == "input" or cfg.keep_pose_posterior
+        posterior = self._pose_pool_posteriors() if keep else None
         first = {}
         for g in self.goals.goals:
             first.setdefault(g.target, g)
@@ -292,16 +293,17 @@ class Belief:
             if cfg.copy_weights == "poses":  # or the target's posterior over its poses from the input
                 share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
                                                 pooled.quats_wxyz[None], cfg)[0])
-            elif posterior is not None:
+            elif cfg.copy_weights == "input" and posterior is not None:
                 share = posterior[t]
             for i in range(n):
                 own = idx[i:] if i == n - 1 else idx[i:i + 1]
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
                 if posterior is not None:
-                    inner.append(share[own] / max(share[own].sum(), 1e-300))
+                    inner.append(posterior[t][own] / max(posterior[t][own].sum(), 1e-300))
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        # each copy's weights over its own poses start uniform (under "input" it keeps their posterior)
+        # each copy's weights over its own poses start uniform (under "input" or keep_pose_posterior it keeps
+        # their posterior)
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
                       pose_log_w=None if posterior is None else _padded_log(inner, out.goals.pose_mask),
                       anchor=self.anchor)
