@@ -55,10 +55,9 @@ def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str,
         poses = [(snap.probs[g] * np.exp(snap.pose_log_w[g, k]), p)
                  for g in np.flatnonzero(snap.goals.target_mask(task))
                  for k, p in enumerate(snap.goals.goals[g].poses)]
-        weighted = [(w, p.position) for w, p in poses]
-        total = sum(w for w, _ in weighted)
-        share = sum(w for w, x in weighted if np.linalg.norm(x - want) < SAME_M) / total
-        likeliest = max(weighted, key=lambda wx: wx[0])[1]
+        total = sum(w for w, _ in poses)
+        share = sum(w for w, p in poses if np.linalg.norm(p.position - want) < SAME_M) / total
+        likeliest = max(poses, key=lambda wp: wp[0])[1].position
         if due and t + 1e-9 >= due[0]:
             due.pop(0)
             lines.append(f"t={t:.1f} s: the six likeliest of the target's poses")

@@ -23,11 +23,9 @@ import numpy as np
 
 from sa_daemon.config import load_config
 from sa_daemon.sim.episode import run_trial
-from sa_daemon.sim.users import load_user
+from sa_daemon.sim.users import builtin_user_names, load_user
 from sa_daemon.world.scene import load_scene
 
-USERS = ("calibrated", "confident", "hasty", "hesitant", "imprecise", "own-pose", "own-pose-off-list",
-         "rotate-first")
 MOVING_MPS = 1e-3
 """A robot translation slower than this (m/s) has no direction to reverse."""
 
@@ -55,7 +53,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     a = ap.parse_args()
     for config in a.config or [None]:
-        jobs = [(a.scene, a.task, u, a.first_seed + s, config) for u in USERS for s in range(a.seeds)]
+        jobs = [(a.scene, a.task, u, a.first_seed + s, config) for u in builtin_user_names()
+                for s in range(a.seeds)]
         with ProcessPoolExecutor(a.jobs) as pool:
             rows = list(pool.map(measure, jobs))
         total = sum(r[0] for r in rows)

@@ -293,7 +293,7 @@ class Belief:
             if cfg.copy_weights == "poses":  # or the target's posterior over its poses from the input
                 share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
                                                 pooled.quats_wxyz[None], cfg)[0])
-            elif cfg.copy_weights == "input" and posterior is not None:
+            elif cfg.copy_weights == "input":
                 share = posterior[t]
             for i in range(n):
                 own = idx[i:] if i == n - 1 else idx[i:i + 1]

@@ -14,7 +14,7 @@ must also lift the task's object after closing for the trial to succeed.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -198,7 +198,7 @@ def run_trial(
     user = SimulatedUser(task, want, cfg.sim_user, cfg.input, rng, dt)
     goals = scene.goals
     if pose_known:
-        goals = tuple(replace(g, poses=(want,)) if g.target == goal.target else g for g in goals)
+        goals = tuple(g.with_poses((want,)) if g.target == goal.target else g for g in goals)
     ctl = Controller(cfg, goals, method, dt, arm.kinematics)
     solver = Solver(ctl.model)
     plan_every = max(1, round(cfg.planner.period_s / dt))
