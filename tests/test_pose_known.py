@@ -46,6 +46,15 @@ def test_the_tasks_goal_holds_the_users_own_pose_alone_and_the_others_keep_their
             assert b.poses == a.poses
 
 
+def test_the_trial_reports_the_pose_its_user_drove_to():
+    _, r = first_goals("own-pose-off-list", 300, False)
+    known, _ = first_goals("own-pose-off-list", 300, True)
+    (pose,) = next(g.poses for g in known.goals if g.target == TASK)
+    assert r.user_pose is not None and np.allclose(r.user_pose.position, pose.position)
+    assert np.allclose(r.user_pose.quat_wxyz, pose.quat_wxyz)
+    assert "user_pose" not in r.metrics()  # not part of the JSON record
+
+
 def test_knowing_the_pose_shortens_an_own_pose_users_trial():
     _, listed = first_goals("own-pose", 300, False)
     _, known = first_goals("own-pose", 300, True)

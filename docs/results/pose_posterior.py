@@ -10,7 +10,9 @@ wants among all the task target's poses (each goal's probability times its poste
 a pose listed twice, e.g. at two yaws a half-turn apart, counts once per listing), how far the
 likeliest pose is from it (cm), how far the gripper is from it (cm), the action chosen, the mode, and
 how many resamplings (section III-G: a new goal set) happened since the row before. Under the default
-``intent.copy_weights = "poses"`` a resampling starts each copy's posterior over its poses afresh. At
+``intent.copy_weights = "poses"`` a resampling starts each copy's posterior over its poses afresh
+(``intent.keep_pose_posterior = true`` carries the target's posterior over). The user's pose is the
+trial's own (``TrialResult.user_pose``). At
 each ``--at`` time (the first plan at or after it) it lists the six likeliest poses: share, offset from
 the user's pose (cm, degrees) and from the gripper.
 ``docs/results.md`` ("Session 42") used it on the own-pose user's Table I trial.
@@ -24,8 +26,7 @@ import numpy as np
 
 from sa_daemon.config import config_from_dict
 from sa_daemon.geometry import quat_angle
-from sa_daemon.sim.episode import desired_pose, run_trial
-from sa_daemon.sim.success import scene_object
+from sa_daemon.sim.episode import run_trial
 from sa_daemon.sim.users import load_user
 from sa_daemon.world.scene import load_scene
 
@@ -40,18 +41,17 @@ def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str,
     the ``at`` times."""
     scene = load_scene(scene_name)
     cfg = load_user(user).apply(config_from_dict({"intent": {"reach_pose": reach}}))
-    goal = scene.goal(task)
-    # the pose the trial's user wants: drawn first from the seed's generator, as run_trial draws it
-    want_pose = desired_pose(goal, scene.start, cfg, np.random.default_rng(seed), None,
-                             scene_object(scene, goal.object))
+    plans: list[tuple] = []
+    result = run_trial(scene, task, "policy", seed, cfg, user_name=user,
+                       on_plan=lambda t, snap, res: plans.append((t, snap, res.action.label)))
+    want_pose = result.user_pose
     want = want_pose.position
     rows: list[tuple] = []
     lines: list[str] = []
     due = sorted(at)
-
-    def on_plan(t: float, snap, result) -> None:
+    for t, snap, label in plans:
         if snap.pose_log_w is None:
-            return
+            continue
         poses = [(snap.probs[g] * np.exp(snap.pose_log_w[g, k]), p)
                  for g in np.flatnonzero(snap.goals.target_mask(task))
                  for k, p in enumerate(snap.goals.goals[g].poses)]
@@ -67,10 +67,7 @@ def posterior_rows(scene_name: str, task: str, user: str, seed: int, reach: str,
                              f"{100 * np.linalg.norm(p.position - snap.pose.position):4.1f} cm "
                              f"{np.degrees(quat_angle(p.quat_wxyz, snap.pose.quat_wxyz)):4.0f} deg")
         rows.append((t, share, float(np.linalg.norm(likeliest - want)),
-                     float(np.linalg.norm(snap.pose.position - want)), result.action.label, snap.mode.value,
-                     snap.goals))
-
-    result = run_trial(scene, task, "policy", seed, cfg, user_name=user, on_plan=on_plan)
+                     float(np.linalg.norm(snap.pose.position - want)), label, snap.mode.value, snap.goals))
     return rows, result, lines
 
 

@@ -90,6 +90,7 @@ class TrialResult:
     user: str = "calibrated"  # the simulated user's profile (sim/users.py)
     yes_withdrawn: int = 0  # "yes" answers withdrawn against the user's opposition (asking.withdraw_yes_s)
     no_withdrawn: int = 0  # times the "no" answers were withdrawn so (asking.withdraw_no_s)
+    user_pose: Pose | None = None  # the grasp pose the simulated user drove to (not in the JSON record)
 
     def metrics(self) -> dict:
         """The JSON record of the trial (without the timeline)."""
@@ -275,6 +276,7 @@ def run_trial(
         asked=asked,
         early_plans=early,
         user=user_name,
+        user_pose=want,
         completion_time_s=round(elapsed, 6),
         mode_changes=metrics.mode_changes([Mode.TRANSLATION.value] + modes),
         joystick_input=metrics.joystick_input(axes),
