@@ -86,12 +86,13 @@ class IntentConfig(_Section):
         "paper's MaxEnt IOC, the default (measured in sessions 22-23 and left off; docs/model.md, The tracker)",
     )
     reach_pose: Literal["closest", "tracked", "tracked_moves"] = Field(
-        "closest",
-        description="the grasp pose a goal is driven to and scored at: closest = the paper's k_c for the moves and "
-        "the planner's rollouts (closest by distance) and each goal's lowest-value pose for HO; tracked = for all "
-        "of them the pose the input since the last resampling points at (each goal's posterior over its poses "
-        "times exp(-V) at the gripper; docs/model.md, One grasp pose for HO, the moves and the rollouts); "
-        "tracked_moves = that pose for the moves and the rollouts, HO keeping the paper's lowest-value poses",
+        "tracked_moves",
+        description="the grasp pose a goal is driven to and scored at: tracked_moves = the pose the input since "
+        "the last resampling points at (each goal's posterior over its poses times exp(-V) at the gripper) for the "
+        "moves and the planner's rollouts, HO keeping the paper's lowest-value poses (the default since session "
+        "43, docs/results.md); closest = the paper's k_c for the moves and the rollouts (closest by distance) "
+        "and each goal's lowest-value pose for HO; tracked = the tracked pose for HO too (docs/model.md, One "
+        "grasp pose for HO, the moves and the rollouts)",
     )
     copy_reach: Literal["own", "target", "likeliest"] = Field(
         "own",
@@ -111,11 +112,12 @@ class IntentConfig(_Section):
         "keeps what the input said about the pose (docs/model.md)",
     )
     keep_pose_posterior: bool = Field(
-        False,
+        True,
         description="a resampling keeps, for each copy it makes, the target's posterior over the copy's own grasp "
         "poses from the input so far (with copy_weights equal or poses the copies' probabilities are as those "
-        "say; input keeps it already); false = each copy's pose weights start afresh. Read where the pose "
-        "posterior is (reach_pose tracked or tracked_moves, poses tracked; session 42, docs/results.md)",
+        "say; input keeps it already; the default since session 43); false = each copy's pose weights start "
+        "afresh. Read where the pose posterior is kept (reach_pose tracked or tracked_moves, or poses tracked; "
+        "session 42, docs/results.md)",
     )
 
     @property

@@ -20,8 +20,11 @@ from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
 GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
-INTENT = IntentConfig(step_cost="time", rationality=1.0, copy_weights="equal")  # Javdani's form, the paper's Fig. 2 copies
-PATH = IntentConfig(step_cost="path", rationality=1.0)
+# The paper's k_c and each resampling's copies starting their pose weights afresh (the defaults until
+# session 43); the tests of the pose posterior kept through a resampling set it themselves.
+PAPER_REACH = {"reach_pose": "closest", "keep_pose_posterior": False}
+INTENT = IntentConfig(step_cost="time", rationality=1.0, copy_weights="equal", **PAPER_REACH)  # Javdani's form, the paper's Fig. 2 copies
+PATH = IntentConfig(step_cost="path", rationality=1.0, **PAPER_REACH)
 MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})
 NEAREST = MARGINAL.model_copy(update={"poses": "nearest"})
 T = 0.1  # ACTION_APPLY_TIME (s)

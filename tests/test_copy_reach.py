@@ -55,7 +55,8 @@ def split() -> Belief:
 
 
 def model(copy_reach: str) -> SharedAutonomyModel:
-    return SharedAutonomyModel(config_from_dict({"intent": {"copy_reach": copy_reach}}))
+    # copy_reach chooses among k_c's: the paper's reach (the default until session 43)
+    return SharedAutonomyModel(config_from_dict({"intent": {"copy_reach": copy_reach, "reach_pose": "closest"}}))
 
 
 def copies(goals: GoalSet) -> np.ndarray:

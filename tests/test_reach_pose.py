@@ -1,9 +1,10 @@
 """One grasp pose per goal for HO, the moves and the planner's rollouts (``intent.reach_pose``).
 
-``closest`` (the default) keeps the paper's ``k_c`` for the moves and the rollouts and each goal's
+``closest`` (the paper's) keeps the paper's ``k_c`` for the moves and the rollouts and each goal's
 lowest-value pose for HO; ``tracked`` takes, for all of them, the pose the input since the last
 resampling points at: each goal's posterior over its poses times ``exp(-V)`` at the gripper;
-``tracked_moves`` takes it for the moves and the rollouts and leaves HO the paper's.
+``tracked_moves`` (the default since session 43) takes it for the moves and the rollouts and leaves HO
+the paper's.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from sa_daemon.world.goals import Goal, GraspType
 from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
-CLOSEST = Config()
+CLOSEST = config_from_dict({"intent": {"reach_pose": "closest"}})
 TRACKED = config_from_dict({"intent": {"reach_pose": "tracked"}})
 MOVES = config_from_dict({"intent": {"reach_pose": "tracked_moves"}})
 # The gripper 1 cm toward the cup's -y grasp: that grasp is the closer and the lower-value one.
@@ -55,7 +56,7 @@ def driven(cfg: Config, samples: int = 40) -> Belief:
     return b
 
 
-def test_default_keeps_no_pose_posterior_and_reaches_as_before():
+def test_closest_keeps_no_pose_posterior_and_reaches_as_the_paper():
     model = SharedAutonomyModel(CLOSEST)
     b = driven(CLOSEST)
     assert b.pose_log_w is None

@@ -178,7 +178,9 @@ def test_a_daemon_whose_user_always_answers_wrongly_withdraws_the_yes_and_finish
     wrongly: the first wrong "yes" is withdrawn, published as ``yes_withdrawn``, and the task still
     ends in a success."""
     d = DaemonProc(tmp_path, "--duration", "120", "--no-speech",
-                   config="[asking]\nwithdraw_yes_s = 1.0\n[sim_user]\nanswer_error_rate = 1.0\n")
+                   config="[asking]\nwithdraw_yes_s = 1.0\n[sim_user]\nanswer_error_rate = 1.0\n"
+                       # the paper's reach (the default until session 43): this trial asks under it
+                       "[intent]\nreach_pose = \"closest\"\nkeep_pose_posterior = false\n")
     try:
         d.wait_ready()
         c = d.collector

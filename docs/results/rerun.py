@@ -33,7 +33,7 @@ BEFORE_THE_KEY = {
     "planner": {"model": "commit", "ho_belief": "fixed", "watch_evidence": 1.0, "rank_goals": "goal",
                 "user_speed_unused": "zero"},
     "intent": {"step_cost": "time", "rationality": 1.0, "poses": "nearest", "turn_charge": 0.0,
-               "copy_weights": "equal"},
+               "copy_weights": "equal", "reach_pose": "closest", "keep_pose_posterior": False},
     "ho": {"generator": "gradient"},
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
@@ -53,7 +53,9 @@ without ``planner.rank_goals`` (session 32) ranked the top goals by their own pr
 ``"cover"`` since session 33); one without ``intent.copy_weights`` (session 19) gave a target's copies
 equal shares, and one without ``planner.user_speed_unused`` (session 35) predicted a mode not yet entered
 still (``"poses"`` and ``"deflection"`` since session 37); one without ``asking.learn_answer_time``
-(session 39) charged every question ``reward.question_time_s``. The ``-turn-charge`` files (session 22) measured
+(session 39) charged every question ``reward.question_time_s``; one without ``intent.reach_pose`` (session
+25) drove the moves to ``k_c`` (``"tracked_moves"`` since session 43), and one without
+``intent.keep_pose_posterior`` (session 42) started each copy's pose weights afresh (kept since session 43). The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""
 
