@@ -96,7 +96,8 @@ class IntentConfig(_Section):
     )
     copy_reach: Literal["own", "target", "likeliest"] = Field(
         "own",
-        description="which k_c the copies resampling makes of one target (section III-G) are driven to and "
+        description="with reach_pose = closest (the tracked reach gives each copy its own tracked pose), which "
+        "k_c the copies resampling makes of one target (section III-G) are driven to and "
         "scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of its "
         "own, the default); target = the closest over all the target's poses; likeliest = the k_c of the "
         "target's most probable copy (screened in session 30 and left off; docs/model.md, Copies that share "
