@@ -32,6 +32,10 @@ START_TIMEOUT_S = 60.0
 #: ``cup:top``), so tests of the question machinery (speech, answers, the protocol) and of the pomdp_py peer,
 #: which plans this model, get what they need in good time; the default planner asks about once a task.
 COMMIT_MODEL_TOML = '[planner]\nmodel = "commit"\n[reward]\nquestion_time_s = 0.0\n'
+PAPER_REACH = {"reach_pose": "closest", "keep_pose_posterior": False}
+"""``[intent]`` keys of the paper's reach (moves to ``k_c``, each copy's pose weights afresh after a
+resampling; the default until session 43), for tests whose trials were traced under it."""
+PAPER_REACH_TOML = "[intent]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in PAPER_REACH.items())
 DEFAULT_RUN = ("--arm", "kinematic", "--input", "sim", "--scene", "scene1", "--task", "cup:top")
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import PAPER_REACH
 
 from sa_daemon.config import Config, IntentConfig
 from sa_daemon.geometry import Pose
@@ -20,9 +21,8 @@ from sa_daemon.world.goalset import GoalSet
 
 TOP = (math.pi, 0.0, 0.0)
 GRIPPER = Pose.from_rpy([0.30, 0.0, 0.20], TOP)
-# The paper's k_c and each resampling's copies starting their pose weights afresh (the defaults until
-# session 43); the tests of the pose posterior kept through a resampling set it themselves.
-PAPER_REACH = {"reach_pose": "closest", "keep_pose_posterior": False}
+# The paper's reach (helpers.PAPER_REACH); the tests of the pose posterior kept through a resampling set
+# their own.
 INTENT = IntentConfig(step_cost="time", rationality=1.0, copy_weights="equal", **PAPER_REACH)  # Javdani's form, the paper's Fig. 2 copies
 PATH = IntentConfig(step_cost="path", rationality=1.0, **PAPER_REACH)
 MARGINAL = PATH.model_copy(update={"rationality": 10.0, "poses": "marginal"})

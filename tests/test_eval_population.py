@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import PAPER_REACH
 
 from sa_daemon.config import Config, config_from_dict
 from sa_daemon.planner.snapshot import Snapshot
@@ -220,7 +221,7 @@ def test_a_question_record_ranks_the_target_apart_from_its_object():
 def test_a_trial_records_each_question_with_the_belief_it_was_asked_on():
     # the first of a few trials that asks at all (the point is the record, not whether this one asks; the
     # paper's reach, the default until session 43, asks on these seeds)
-    cfg = config_from_dict({"intent": {"reach_pose": "closest", "keep_pose_posterior": False}})
+    cfg = config_from_dict({"intent": PAPER_REACH})
     trials = (run_trial(load_scene("scene1"), task, "policy", seed, cfg)
               for task in ("cup:top", "cup:side") for seed in range(4))
     r = next((t for t in trials if t.questions > 0), None)

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import PAPER_REACH, PAPER_REACH_TOML
 
 from sa_daemon.config import config_from_dict
 from sa_daemon.control.controller import Controller
@@ -28,16 +29,16 @@ _spec.loader.exec_module(qv)
 
 SCENE = load_scene("scene1")
 CASE = ("cup:top", "hasty", 301)
-PAPER_REACH = {"intent": {"reach_pose": "closest", "keep_pose_posterior": False}}
-"""The trial was traced with the moves driving to the paper's k_c (the default until session 43); with
-today's tracked reach it does not ask."""
+PAPER = {"intent": PAPER_REACH}
+"""The trial was traced with the paper's reach (the default until session 43); with today's tracked reach
+it does not ask."""
 ACCEPT_PLAN = Controller.accept_plan
 """The controller's own method, before the script patches it for a vetoed run."""
 
 
 @pytest.fixture(scope="module")
 def asked():
-    trial, chosen = qv.run(SCENE, *CASE, config_from_dict(PAPER_REACH))
+    trial, chosen = qv.run(SCENE, *CASE, config_from_dict(PAPER))
     assert trial.success and trial.asked, "the traced trial asks (docs/results.md, session 35)"
     return trial, chosen
 
@@ -55,7 +56,7 @@ def test_a_question_is_recorded_with_its_margin_mode_and_speed(asked):
 def test_the_vetoed_run_is_the_same_trial_until_the_question_and_asks_nothing_in_the_window(asked):
     trial, chosen = asked
     t_q = trial.asked[0]["t"]
-    cfg = config_from_dict(PAPER_REACH)
+    cfg = config_from_dict(PAPER)
     alt, alt_chosen = qv.run(SCENE, *CASE, cfg, veto=(t_q, t_q + cfg.planner.horizon_s))
     assert [c[0] for c in alt_chosen if c[0] < t_q] == [c[0] for c in chosen if c[0] < t_q]
     assert not [a for a in alt.asked if t_q <= a["t"] < t_q + cfg.planner.horizon_s]
@@ -74,7 +75,7 @@ def test_the_veto_hands_over_the_best_action_that_is_not_a_question(asked):
         if abs(t - t_q) < 1e-9:
             seen["r"] = result
 
-    run_trial(SCENE, CASE[0], "policy", CASE[2], load_user(CASE[1]).apply(config_from_dict(PAPER_REACH)), user_name=CASE[1],
+    run_trial(SCENE, CASE[0], "policy", CASE[2], load_user(CASE[1]).apply(config_from_dict(PAPER)), user_name=CASE[1],
               on_plan=on_plan)
     r = seen["r"]
     assert r.action.kind is ActionKind.QUESTION
@@ -88,7 +89,7 @@ def test_the_veto_hands_over_the_best_action_that_is_not_a_question(asked):
 def test_the_script_runs_and_summarises(tmp_path):
     out = tmp_path / "qv.json"
     cfg = tmp_path / "paper_reach.toml"
-    cfg.write_text('[intent]\nreach_pose = "closest"\nkeep_pose_posterior = false\n')
+    cfg.write_text(PAPER_REACH_TOML)
     done = subprocess.run([sys.executable, str(SCRIPT), "--scene", "scene1", "--task", "cup:top", "--user", "hasty",
                            "--first-seed", "301", "--seeds", "1", "--config", str(cfg), "--json", str(out)],
                           capture_output=True, text=True, timeout=600, check=True)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import DaemonProc
+from helpers import PAPER_REACH_TOML, DaemonProc
 
 from sa_daemon.arm.base import ArmState
 from sa_daemon.config import ConfigError, config_from_dict
@@ -180,7 +180,7 @@ def test_a_daemon_whose_user_always_answers_wrongly_withdraws_the_yes_and_finish
     d = DaemonProc(tmp_path, "--duration", "120", "--no-speech",
                    config="[asking]\nwithdraw_yes_s = 1.0\n[sim_user]\nanswer_error_rate = 1.0\n"
                        # the paper's reach (the default until session 43): this trial asks under it
-                       "[intent]\nreach_pose = \"closest\"\nkeep_pose_posterior = false\n")
+                       + PAPER_REACH_TOML)
     try:
         d.wait_ready()
         c = d.collector
