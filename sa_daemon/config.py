@@ -103,14 +103,16 @@ class IntentConfig(_Section):
         "target's most probable copy (screened in session 30 and left off; docs/model.md, Copies that share "
         "one k_c)",
     )
-    copy_weights: Literal["equal", "poses", "input"] = Field(
+    copy_weights: Literal["equal", "poses", "input", "tracked"] = Field(
         "poses",
         description="a target's probability over the copies resampling makes of it (section III-G): equal = "
         "the same share each (the paper's Fig. 2); poses = each copy's share of the target's grasp-pose weights "
         "exp(-V) at the gripper, so the next input's likelihood is the same before and after (the default since "
         "session 37, docs/results.md); input = each copy's share of "
         "the target's posterior over its grasp poses from the input since the last resampling, so a split "
-        "keeps what the input said about the pose (docs/model.md)",
+        "keeps what the input said about the pose (docs/model.md); tracked = each copy's share of that posterior "
+        "times the weights exp(-V) at the gripper, the score the tracked reach picks a pose by (session 44, "
+        "screened, off)",
     )
     keep_pose_posterior: bool = Field(
         True,

@@ -15,7 +15,7 @@ from helpers import PAPER_REACH
 from sa_daemon.config import Config, IntentConfig
 from sa_daemon.geometry import Pose
 from sa_daemon.model.belief import Belief, cap_probabilities
-from sa_daemon.model.huber import huber_slope, huber_value, marginal_nll, q_minus_v
+from sa_daemon.model.huber import huber_slope, huber_value, marginal_nll, q_minus_v, tracked_goal_poses
 from sa_daemon.world.goals import Goal, GraspType
 from sa_daemon.world.goalset import GoalSet
 
@@ -919,3 +919,55 @@ def test_keep_pose_posterior_carries_each_copys_posterior_over_its_poses_through
         out[keep] = (w[k] / w.sum(), r.probs.copy())
     assert out[True][0] > 0.9 and out[True][0] > out[False][0] + 0.2
     np.testing.assert_allclose(out[True][1], out[False][1], atol=1e-12)  # the copies' probabilities alike
+
+
+def test_copies_weighted_as_the_tracked_reach_scores_keep_its_pose_on_top():
+    """``intent.copy_weights = "tracked"``: a copy's share is its poses' ``w_k exp(-V_k)`` (the posterior
+    from the input times the weights at the gripper), the score :func:`~sa_daemon.model.huber.tracked_goal_poses`
+    picks the reach by; so the pose the reach pointed at before the split is in the likeliest copy after it.
+    ``"poses"`` (``exp(-V_k)`` alone) gives the most to the copy nearest the gripper instead, whatever the
+    input said. Target probabilities are preserved either way."""
+    gs = GoalSet((top_goal("a", offset(dx=-0.06), offset(dy=0.07), offset(dy=-0.09), offset(dz=-0.11)),
+                  top_goal("b", offset(dx=0.15)), top_goal("c", offset(dz=0.15)), top_goal("d", offset(dx=0.15, dz=0.1))))
+    u = np.array([0.0, 0.0, -0.1, 0.0, 0.0, 0.0])  # toward a's farthest pose (-z), away from every other goal
+    far, near = offset(dz=-0.11), offset(dx=-0.06)
+    top = {}
+    for weights in ("poses", "tracked"):
+        cfg = MARGINAL.model_copy(update={"reach_pose": "tracked", "copy_weights": weights})
+        b = Belief.uniform(gs)
+        for _ in range(20):
+            b = b.after_input(GRIPPER, u, cfg)
+        kp, _ = tracked_goal_poses(GRIPPER.position, GRIPPER.quat_wxyz, gs.positions, gs.quats_wxyz,
+                                   b.pose_log_w, cfg)
+        np.testing.assert_allclose(kp[0], far)  # the input pointed the reach at the far pose
+        r = b.resampled(GRIPPER, cfg)
+        assert r is not b and [g.target for g in r.goals.goals].count("a:top") > 1
+        assert r.target_probabilities()["a:top"] == pytest.approx(b.target_probabilities()["a:top"], abs=1e-12)
+        copies = [(p, g) for g, p in zip(r.goals.goals, r.probs) if g.target == "a:top"]
+        top[weights] = max(copies, key=lambda c: c[0])[1]
+    assert any(np.allclose(p.position, far) for p in top["tracked"].poses)
+    assert any(np.allclose(p.position, near) for p in top["poses"].poses)
+    assert not any(np.allclose(p.position, far) for p in top["poses"].poses)
+
+
+@pytest.mark.parametrize("weights", ["poses", "input", "tracked"])
+def test_a_kept_pose_posterior_that_underflows_starts_that_copy_afresh(weights):
+    """A resampling that keeps the pose posterior (``keep_pose_posterior``, ``copy_weights`` ``input`` or
+    ``tracked``) may make a copy of poses the input has all but ruled out (their posterior below
+    ``exp(-745)``, zero in floating point). That copy's pose weights start uniform rather than with no pose
+    at all, so the next input's likelihood, and every probability, stays finite."""
+    a = top_goal("a", offset(dx=-0.06), offset(dy=0.07), offset(dy=-0.09))
+    gs = GoalSet((a, *(top_goal(o, offset(dx=0.15)) for o in ("b", "b", "b"))))
+    cfg = MARGINAL.model_copy(update={"reach_pose": "tracked", "keep_pose_posterior": True, "copy_weights": weights})
+    log_w = np.full((4, 3), -np.inf)
+    log_w[0] = [0.0, -2000.0, -2000.0]  # a's input: its first pose, beyond doubt
+    log_w[1:, 0] = 0.0
+    b = Belief(gs, np.log([0.97, 0.01, 0.01, 0.01]), pose_log_w=log_w)
+    r = b.resampled(GRIPPER, cfg)
+    copies = [g for g in r.goals.goals if g.target == "a:top"]
+    assert r is not b and len(copies) == 2 and len(copies[1].poses) == 2  # (first pose), (the other two)
+    w = r.pose_weights()
+    assert all(np.isfinite(row).any() for row in w)
+    after = r.after_input(GRIPPER, np.array([-0.05, 0.0, 0.0, 0.0, 0.0, 0.0]), cfg)
+    assert np.all(np.isfinite(after.probs)) and after.probs.sum() == pytest.approx(1.0)
+    assert after.target_probabilities()["a:top"] > 0.9

@@ -73,8 +73,8 @@ class Belief:
     confirmed: str | None = None
     ruled_out: frozenset[str] = frozenset()
     pose_log_w: FloatArray | None = None
-    """``intent.poses = "tracked"``, ``intent.reach_pose`` not ``"closest"`` or ``intent.copy_weights =
-    "input"``: each goal's posterior over its own
+    """``intent.poses = "tracked"``, ``intent.reach_pose`` not ``"closest"`` or ``intent.copy_weights``
+    ``"input"`` or ``"tracked"``: each goal's posterior over its own
     grasp poses from the input since the last resampling, ``(G, K)`` log-weights normalised per goal
     (``-inf`` on padding); ``None``: uniform over its poses."""
     anchor: FloatArray | None = None
@@ -159,7 +159,7 @@ class Belief:
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
         its lowest-value one alone (``intent.poses``). The pose posterior is kept whenever ``poses`` or
-        ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input``.
+        ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input`` or ``tracked``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -169,7 +169,7 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
-        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights == "input":
+        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights in ("input", "tracked"):
             # Bayes over each goal's poses, from uniform, along the whole input
             per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()
@@ -276,40 +276,47 @@ class Belief:
         tp = self.target_probabilities()
         alloc = self.copy_allocation()
         pools = self._pose_pools()
-        keep = cfg.copy_weights == "input" or cfg.keep_pose_posterior
-        posterior = self._pose_pool_posteriors() if keep else None
+        keep = cfg.copy_weights in ("input", "tracked") or cfg.keep_pose_posterior
+        log_post = self._pose_pool_log_posteriors() if keep else None
         first = {}
         for g in self.goals.goals:
             first.setdefault(g.target, g)
         goals: list[Goal] = []
         probs: list[float] = []
-        inner: list[FloatArray] = []  # under "input": each new copy's posterior over its own poses
+        inner: list[FloatArray] = []  # when kept: each new copy's log posterior over its own poses
         for t in self.goals.targets:
             template, n = first[t], alloc[t]
             poses = pools[t]
             pooled = template.with_poses(tuple(poses))
             idx = np.argsort(pooled.pose_distances(pose, cfg.rotation_weight_m_per_rad), kind="stable")
-            share = None  # equal shares; else the marginal tracker's weights of the target's poses, here,
-            if cfg.copy_weights == "poses":  # or the target's posterior over its poses from the input
-                share = np.exp(pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
-                                                pooled.quats_wxyz[None], cfg)[0])
+            # equal shares (None); "poses": the marginal tracker's weights exp(-V) of the target's poses,
+            # here; "input": the target's posterior over its poses from the input; "tracked": their product,
+            # the score the tracked reach picks a pose by (huber.tracked_goal_poses)
+            share = None
+            if cfg.copy_weights in ("poses", "tracked"):
+                lw = pose_log_weights(pose.position, pose.quat_wxyz, pooled.positions[None],
+                                      pooled.quats_wxyz[None], cfg)[0]
+                if cfg.copy_weights == "tracked":
+                    lw = lw + log_post[t]
+                    lw = lw - log_sum_exp(lw)
+                share = np.exp(lw)
             elif cfg.copy_weights == "input":
-                share = posterior[t]
+                share = np.exp(log_post[t])
             for i in range(n):
                 own = idx[i:] if i == n - 1 else idx[i:i + 1]
                 goals.append(template.with_poses(tuple(poses[k] for k in own)))
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
-                if posterior is not None:
-                    inner.append(posterior[t][own] / max(posterior[t][own].sum(), 1e-300))
+                if log_post is not None:
+                    inner.append(_log_normalised(log_post[t][own]))
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
         # each copy's weights over its own poses start uniform (under "input" or keep_pose_posterior it keeps
         # their posterior)
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
-                      pose_log_w=None if posterior is None else _padded_log(inner, out.goals.pose_mask),
+                      pose_log_w=None if log_post is None else _padded(inner, out.goals.pose_mask),
                       anchor=self.anchor)
 
-    def _pose_pool_posteriors(self) -> dict[str, FloatArray]:
-        """Each target's posterior over its grasp poses, in :meth:`_pose_pools`' order: a copy's
+    def _pose_pool_log_posteriors(self) -> dict[str, FloatArray]:
+        """Each target's log posterior over its grasp poses, in :meth:`_pose_pools`' order: a copy's
         probability times its posterior over its own poses (:attr:`pose_log_w`), normalised per target."""
         log_w = self.pose_weights() + self.log_p[:, None]
         pools: dict[str, list[FloatArray]] = {t: [] for t in self.goals.targets}
@@ -318,15 +325,22 @@ class Belief:
         out = {}
         for t, parts in pools.items():
             lw = np.concatenate(parts)
-            out[t] = np.exp(lw - log_sum_exp(lw)) if np.isfinite(lw).any() else np.full(len(lw), 1.0 / len(lw))
+            out[t] = _log_normalised(lw)
         return out
 
 
-def _padded_log(rows: list[FloatArray], mask: np.ndarray) -> FloatArray:
-    """``log`` of per-goal pose weights ``rows`` laid out as ``mask`` ``(G, K)`` (``-inf`` on padding)."""
+def _log_normalised(log_w: FloatArray) -> FloatArray:
+    """``log_w`` shifted to sum to one in probability; uniform where it holds no mass at all (every entry
+    ``-inf``: a copy whose poses the input has all but ruled out starts afresh rather than with no pose)."""
+    if not np.isfinite(log_w).any():
+        return np.full(len(log_w), -np.log(len(log_w)))
+    return log_w - log_sum_exp(log_w)
+
+
+def _padded(rows: list[FloatArray], mask: np.ndarray) -> FloatArray:
+    """Per-goal pose log-weights ``rows`` laid out as ``mask`` ``(G, K)`` (``-inf`` on padding)."""
     out = np.full(mask.shape, -np.inf)
-    with np.errstate(divide="ignore"):
-        for i, r in enumerate(rows):
-            out[i, :len(r)] = np.log(r)
+    for i, r in enumerate(rows):
+        out[i, :len(r)] = r
     out.setflags(write=False)
     return out
