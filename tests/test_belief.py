@@ -15,7 +15,13 @@ from helpers import PAPER_REACH
 from sa_daemon.config import Config, IntentConfig
 from sa_daemon.geometry import Pose
 from sa_daemon.model.belief import Belief, cap_probabilities
-from sa_daemon.model.huber import huber_slope, huber_value, marginal_nll, q_minus_v, tracked_goal_poses
+from sa_daemon.model.huber import (
+    huber_slope,
+    huber_value,
+    marginal_nll,
+    q_minus_v,
+    tracked_goal_poses,
+)
 from sa_daemon.world.goals import Goal, GraspType
 from sa_daemon.world.goalset import GoalSet
 
