@@ -957,23 +957,28 @@ def test_copies_weighted_as_the_tracked_reach_scores_keep_its_pose_on_top():
 
 
 @pytest.mark.parametrize("weights", ["poses", "input", "tracked"])
-def test_a_kept_pose_posterior_that_underflows_starts_that_copy_afresh(weights):
+def test_a_kept_pose_posterior_that_underflows_stays_finite(weights):
     """A resampling that keeps the pose posterior (``keep_pose_posterior``, ``copy_weights`` ``input`` or
-    ``tracked``) may make a copy of poses the input has all but ruled out (their posterior below
-    ``exp(-745)``, zero in floating point). That copy's pose weights start uniform rather than with no pose
-    at all, so the next input's likelihood, and every probability, stays finite."""
-    a = top_goal("a", offset(dx=-0.06), offset(dy=0.07), offset(dy=-0.09))
+    ``tracked``) may make copies of poses the input has all but ruled out (their posterior below
+    ``exp(-745)``, zero in floating point). A copy holding only such poses starts uniform over them, one
+    holding some beside a likely pose keeps them at the floor, so every pose weight, the next input's
+    likelihood and every probability stay finite."""
+    far = offset(dz=-0.11)
+    a = top_goal("a", far, offset(dy=0.07), offset(dy=-0.09))  # the gripper is nearest the other two
     gs = GoalSet((a, *(top_goal(o, offset(dx=0.15)) for o in ("b", "b", "b"))))
     cfg = MARGINAL.model_copy(update={"reach_pose": "tracked", "keep_pose_posterior": True, "copy_weights": weights})
     log_w = np.full((4, 3), -np.inf)
-    log_w[0] = [0.0, -2000.0, -2000.0]  # a's input: its first pose, beyond doubt
+    log_w[0] = [0.0, -2000.0, -2000.0]  # a's input: its far pose, beyond doubt
     log_w[1:, 0] = 0.0
     b = Belief(gs, np.log([0.97, 0.01, 0.01, 0.01]), pose_log_w=log_w)
     r = b.resampled(GRIPPER, cfg)
     copies = [g for g in r.goals.goals if g.target == "a:top"]
-    assert r is not b and len(copies) == 2 and len(copies[1].poses) == 2  # (first pose), (the other two)
+    assert r is not b and [len(g.poses) for g in copies] == [1, 2]  # (nearest), (next, far)
     w = r.pose_weights()
-    assert all(np.isfinite(row).any() for row in w)
-    after = r.after_input(GRIPPER, np.array([-0.05, 0.0, 0.0, 0.0, 0.0, 0.0]), cfg)
+    assert np.all(np.isfinite(w[r.goals.pose_mask]))
+    i = next(i for i, g in enumerate(r.goals.goals) if len(g.poses) == 2 and g.target == "a:top")
+    k = next(k for k, p in enumerate(r.goals.goals[i].poses) if np.allclose(p.position, far))
+    assert np.exp(w[i, k]) == pytest.approx(1.0)  # the far pose keeps its copy's posterior
+    after = r.after_input(GRIPPER, np.array([0.0, 0.0, -0.05, 0.0, 0.0, 0.0]), cfg)
     assert np.all(np.isfinite(after.probs)) and after.probs.sum() == pytest.approx(1.0)
     assert after.target_probabilities()["a:top"] > 0.9

@@ -329,11 +329,18 @@ class Belief:
         return out
 
 
+LOG_FLOOR = 745.0
+"""A kept pose log-weight is held within this of its row's largest (``exp(-745)`` is float64's smallest
+positive): below it a weight would be exactly zero, a pose the belief can no longer hold."""
+
+
 def _log_normalised(log_w: FloatArray) -> FloatArray:
-    """``log_w`` shifted to sum to one in probability; uniform where it holds no mass at all (every entry
-    ``-inf``: a copy whose poses the input has all but ruled out starts afresh rather than with no pose)."""
+    """``log_w`` shifted to sum to one in probability, every entry finite: one the input has all but ruled
+    out is held at :data:`LOG_FLOOR` below the largest (where it is ``exp(-745)`` or less, so no sum sees it);
+    with no finite entry at all (a copy of no mass) the row starts afresh, uniform."""
     if not np.isfinite(log_w).any():
         return np.full(len(log_w), -np.log(len(log_w)))
+    log_w = np.maximum(log_w, np.max(log_w) - LOG_FLOOR)
     return log_w - log_sum_exp(log_w)
 
 
