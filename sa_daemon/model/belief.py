@@ -56,6 +56,11 @@ def cap_probabilities(p: FloatArray, cap: float, among: np.ndarray | None = None
     return p
 
 
+INPUT_COPY_WEIGHTS = ("input", "tracked")
+"""The ``intent.copy_weights`` that read the input's posterior over the grasp poses: the belief keeps that
+posterior (:attr:`Belief.pose_log_w`) and carries it through a resampling."""
+
+
 @dataclass(frozen=True, eq=False)
 class Belief:
     """Goals and their normalised log-probabilities.
@@ -169,7 +174,7 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
-        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights in ("input", "tracked"):
+        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights in INPUT_COPY_WEIGHTS:
             # Bayes over each goal's poses, from uniform, along the whole input
             per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()
@@ -276,7 +281,7 @@ class Belief:
         tp = self.target_probabilities()
         alloc = self.copy_allocation()
         pools = self._pose_pools()
-        keep = cfg.copy_weights in ("input", "tracked") or cfg.keep_pose_posterior
+        keep = cfg.copy_weights in INPUT_COPY_WEIGHTS or cfg.keep_pose_posterior
         log_post = self._pose_pool_log_posteriors() if keep else None
         first = {}
         for g in self.goals.goals:
@@ -309,8 +314,8 @@ class Belief:
                 if log_post is not None:
                     inner.append(_log_normalised(log_post[t][own]))
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
-        # each copy's weights over its own poses start uniform (under "input" or keep_pose_posterior it keeps
-        # their posterior)
+        # each copy's weights over its own poses start uniform (when kept: INPUT_COPY_WEIGHTS or
+        # keep_pose_posterior, their posterior)
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
                       pose_log_w=None if log_post is None else _padded(inner, out.goals.pose_mask),
                       anchor=self.anchor)
