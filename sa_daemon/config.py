@@ -96,12 +96,13 @@ class IntentConfig(_Section):
     )
     copy_reach: Literal["own", "target", "likeliest"] = Field(
         "own",
-        description="with reach_pose = closest (the tracked reach gives each copy its own tracked pose), which "
-        "k_c the copies resampling makes of one target (section III-G) are driven to and "
-        "scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of its "
-        "own, the default); target = the closest over all the target's poses; likeliest = the k_c of the "
-        "target's most probable copy (screened in session 30 and left off; docs/model.md, Copies that share "
-        "one k_c)",
+        description="which grasp pose the copies resampling makes of one target (section III-G) are driven to "
+        "and scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of "
+        "its own, the default); target = with reach_pose = closest the closest over all the target's poses "
+        "(screened in session 30 and left off), with a tracked reach the pose of highest tracked score over "
+        "all the target's copies, each copy's score plus its log probability: the target's pooled posterior "
+        "over its poses times exp(-V) (session 45, screened, off); likeliest = the k_c (or tracked pose) of the "
+        "target's most probable copy (docs/model.md, Copies that share one k_c)",
     )
     copy_weights: Literal["equal", "poses", "input", "tracked"] = Field(
         "poses",

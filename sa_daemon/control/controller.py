@@ -419,7 +419,7 @@ class Controller:
         error = None
         b = self._belief
         try:
-            reach = self._model.reach_poses(b.goals, state.pose, b.pose_log_w)
+            reach = self._model.reach_poses(b.goals, state.pose, b.pose_log_w, b.probs)
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             has_input = fresh and bool(np.any(u))
             self._withdraw_answers_if_opposed(t, cmd, has_input)

@@ -326,16 +326,23 @@ def nearest_goal_poses(
     return goal_positions[rows, k], goal_quats[rows, k]
 
 
+def tracked_pose_scores(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
+                        pose_log_w: FloatArray, cfg: IntentConfig) -> FloatArray:
+    """``log P(k | g, input) + log w_k(x)`` ``(G, K)``, the score by which the tracked reach picks each goal's
+    grasp pose (:func:`tracked_goal_poses`): the goal's posterior over its poses ``pose_log_w`` ``(G, K)``
+    (:attr:`~.belief.Belief.pose_log_w`) times the weights ``exp(-V_k)`` at the gripper's ``position`` (m) /
+    ``quat`` (wxyz) (:func:`pose_log_weights`); ``-inf`` on padding."""
+    return np.asarray(pose_log_w) + pose_log_weights(position, quat, goal_positions, goal_quats, cfg)
+
+
 def tracked_goal_poses(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
                        pose_log_w: FloatArray, cfg: IntentConfig) -> tuple[FloatArray, FloatArray]:
     """Each goal's grasp pose that the input so far points at, ``(G, 3)``, ``(G, 4)``
-    (``intent.reach_pose = "tracked"``): ``argmax_k log P(k | g, input) + log w_k(x)``, the goal's
-    posterior over its poses ``pose_log_w`` ``(G, K)`` (:attr:`~.belief.Belief.pose_log_w`) times the
-    weights ``exp(-V_k)`` at the gripper's ``position`` (m) / ``quat`` (wxyz) (:func:`pose_log_weights`).
-    With no input yet (a uniform posterior) this is the pose of least ``V`` as the tracker weighs it (its
-    rotation part ``beta_r / beta`` times the translation's): among poses of one orientation, the nearest,
-    as :func:`nearest_goal_poses`, whose ``V`` weighs rotation as HO's reference does, picks."""
-    lw = pose_log_weights(position, quat, goal_positions, goal_quats, cfg)
-    k = np.argmax(np.asarray(pose_log_w) + lw, axis=1)
+    (``intent.reach_pose = "tracked"``): ``argmax_k log P(k | g, input) + log w_k(x)``
+    (:func:`tracked_pose_scores`). With no input yet (a uniform posterior) this is the pose of least ``V``
+    as the tracker weighs it (its rotation part ``beta_r / beta`` times the translation's): among poses of
+    one orientation, the nearest, as :func:`nearest_goal_poses`, whose ``V`` weighs rotation as HO's
+    reference does, picks."""
+    k = np.argmax(tracked_pose_scores(position, quat, goal_positions, goal_quats, pose_log_w, cfg), axis=1)
     rows = np.arange(goal_positions.shape[0])
     return goal_positions[rows, k], goal_quats[rows, k]

@@ -20,7 +20,7 @@ from ..geometry import FloatArray, Pose, quat_angle
 from ..world.goalset import GoalSet
 from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
-from .huber import tracked_goal_poses
+from .huber import tracked_pose_scores
 from .methods import MethodSpec, method_spec
 from .reward import opposes
 from .twists import blend, ho_robot_twist, move_twist
@@ -205,21 +205,36 @@ class SharedAutonomyModel:
         score = -np.asarray(probs, dtype=float) if probs is not None else np.zeros(len(goals))
         return goals.desired_poses(pose, w, score)
 
-    def reach_poses(self, goals: GoalSet, pose: Pose,
-                    pose_log_w: FloatArray | None = None) -> tuple[FloatArray, FloatArray] | None:
+    def reach_poses(self, goals: GoalSet, pose: Pose, pose_log_w: FloatArray | None = None,
+                    probs: FloatArray | None = None) -> tuple[FloatArray, FloatArray] | None:
         """The grasp pose each goal is driven to and scored at, ``((G, 3), (G, 4))``, when
         ``intent.reach_pose`` is ``"tracked"`` or ``"tracked_moves"``: the pose the input since the last
         resampling points at (:func:`~.huber.tracked_goal_poses`; ``pose_log_w`` the belief's
-        :attr:`~.belief.Belief.pose_log_w`, ``None``: no input yet). ``None`` with ``"closest"``: the moves and
-        the planner's rollouts take ``k_c`` (:meth:`GoalSet.desired_poses`) and HO each goal's lowest-value
-        pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives these to a move only.)"""
+        :attr:`~.belief.Belief.pose_log_w`, ``None``: no input yet), shared among the copies of one target as
+        ``intent.copy_reach`` says: ``own`` each copy its own; ``target`` the pose of highest score over all
+        the target's copies, each copy's scores (:func:`~.huber.tracked_pose_scores`) plus its log
+        probability (``probs``, ``(G,)``; ``None``: equal), i.e. the target's pooled posterior over its poses
+        times ``exp(-V)``; ``likeliest`` the tracked pose of the target's most probable copy. ``None`` with
+        ``"closest"``: the moves and the planner's rollouts take ``k_c`` (:meth:`desired_poses`) and HO each
+        goal's lowest-value pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives
+        these to a move only.)"""
         if self.cfg.intent.reach_pose == "closest":
             return None
         if pose_log_w is None:
             with np.errstate(divide="ignore"):
                 pose_log_w = np.log(goals.pose_mask.astype(float))
-        return tracked_goal_poses(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
-                                  self.cfg.intent)
+        score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
+                                    self.cfg.intent)
+        share = self.cfg.intent.copy_reach
+        p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
+        if share == "own":
+            lender = None
+        elif share == "target":
+            with np.errstate(divide="ignore"):
+                lender = -(np.max(score, axis=1) + np.log(p))
+        else:
+            lender = -p
+        return goals.poses_at(np.argmax(score, axis=1), lender)
 
     def robot_twist(
         self, action: Action, goals: GoalSet, probs: FloatArray, pose: Pose, user_twist: FloatArray,

@@ -42,7 +42,7 @@ class Problem:
         self.snap = snap
         goals = snap.goals
         self.b0 = snap.probs
-        self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
+        self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w, snap.probs)
                             or model.desired_poses(goals, snap.pose, snap.probs))
         self.moves, self.questions = model.action_set(snap.method, goals, self.b0, snap.pose, snap.asked)
         self.u = snap.user_twist

@@ -115,7 +115,7 @@ class WatchSearch:
         self.snap, self.deadline, self.node_budget = snap, deadline, node_budget
         goals = snap.goals
         self.b0 = snap.probs
-        self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w)
+        self.kp, self.kq = (model.reach_poses(goals, snap.pose, snap.pose_log_w, snap.probs)
                             or model.desired_poses(goals, snap.pose, snap.probs))
         self.pregrasp = pregrasp_points(self.kp, self.kq, cfg.intent.user_standoff_m)
         self.poses = ((goals.positions, goals.quats_wxyz) if cfg.planner.watch_likelihood == "marginal" else None)

@@ -93,13 +93,20 @@ class GoalSet:
 
         ``lender_score`` ``(G,)``: the copies resampling made of one high-level target all take the ``k_c`` of
         the copy with the lowest score (``intent.copy_reach``); ``None``: each goal its own."""
-        k = self.desired_indices(pose, rotation_weight_m_per_rad)
+        return self.poses_at(self.desired_indices(pose, rotation_weight_m_per_rad), lender_score)
+
+    def poses_at(self, k: np.ndarray, lender_score: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """Pose ``k[g]`` of every goal ``g`` as arrays ``((G, 3), (G, 4))``; ``k`` ``(G,)`` indices into each
+        goal's poses.
+
+        ``lender_score`` ``(G,)``: the copies of one high-level target all take the pose of the copy with the
+        lowest score (``intent.copy_reach``); ``None``: each goal its own."""
         rows = np.arange(len(self.goals))
         if lender_score is not None:
             owner = rows.copy()
             for members in (np.flatnonzero(self.target_index == t) for t in range(len(self.targets))):
                 owner[members] = members[np.argmin(np.asarray(lender_score)[members])]
-            rows, k = owner, k[owner]
+            rows, k = owner, np.asarray(k)[owner]
         return self.positions[rows, k], self.quats_wxyz[rows, k]
 
     def desired_distances(self, pose: Pose, rotation_weight_m_per_rad: float) -> FloatArray:
