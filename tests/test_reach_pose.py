@@ -116,6 +116,11 @@ def test_snapshot_carries_the_pose_posterior_and_refuses_a_malformed_one():
     back = Snapshot.from_dict(json.loads(json.dumps(snap.to_dict())))
     np.testing.assert_allclose(np.exp(back.pose_log_w), np.exp(b.pose_log_w), atol=1e-12)
     assert back.pose_log_w[1, 1] == -np.inf
+    faint = np.array(b.pose_log_w)
+    faint[0, 0] = -760.0  # a pose the input has all but ruled out: exp rounds it to zero
+    back = Snapshot.from_dict(json.loads(json.dumps(Snapshot(b.goals, b.probs, GRIPPER, AT_PLUS_Y,
+                                                             pose_log_w=faint).to_dict())))
+    assert -760.0 < back.pose_log_w[0, 0] < -740.0 and back.pose_log_w[1, 1] == -np.inf
     for bad in (np.zeros((2, 3)), np.where(np.isfinite(b.pose_log_w), np.nan, -np.inf),
                 np.full((2, 2), -np.inf)):
         with pytest.raises(ValueError, match="pose_log_w"):

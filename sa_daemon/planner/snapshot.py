@@ -110,9 +110,15 @@ class Snapshot:
             "user_speed": list(self.user_speed),
             "questions_left": self.questions_left,
             "anchor": self.anchor.tolist(),
-            "pose_weights": None if self.pose_log_w is None else np.exp(self.pose_log_w).tolist(),
+            "pose_weights": None if self.pose_log_w is None else self._pose_weights().tolist(),
             "question_time_s": self.question_time_s,
         }
+
+    def _pose_weights(self) -> FloatArray:
+        """``exp(pose_log_w)``, a grasp pose's weight held at the smallest positive float64 where ``exp``
+        would round it to zero (below ``exp(-745)``): zero is a padded pose (:meth:`from_dict`)."""
+        w = np.exp(self.pose_log_w)
+        return np.where(self.goals.pose_mask, np.maximum(w, np.finfo(float).smallest_subnormal), 0.0)
 
     @classmethod
     def from_dict(cls, d: dict) -> Snapshot:
