@@ -94,15 +94,17 @@ class IntentConfig(_Section):
         "and each goal's lowest-value pose for HO; tracked = the tracked pose for HO too (docs/model.md, One "
         "grasp pose for HO, the moves and the rollouts)",
     )
-    copy_reach: Literal["own", "target", "likeliest"] = Field(
+    copy_reach: Literal["own", "target", "likeliest", "pooled"] = Field(
         "own",
         description="which grasp pose the copies resampling makes of one target (section III-G) are driven to "
         "and scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of "
         "its own, the default); target = with reach_pose = closest the closest over all the target's poses "
-        "(screened in session 30 and left off), with a tracked reach the pose of highest tracked score over "
-        "all the target's copies, each copy's score plus its log probability: the target's pooled posterior "
-        "over its poses times exp(-V) (session 45, screened, off); likeliest = the k_c (or tracked pose) of the "
-        "target's most probable copy (docs/model.md, Copies that share one k_c)",
+        "(screened in session 30 and left off), with a tracked reach the pose of highest P(copy) P(pose | copy, input) "
+        "w(pose | copy) over all the target's copies, w the copy's weights exp(-V) at the gripper normalised "
+        "over its own poses (session 45, screened, off); likeliest = the k_c (or tracked pose) of the "
+        "target's most probable copy; pooled = with a tracked reach, the pose of highest P(pose | target, input) "
+        "exp(-V) over all the target's poses, the belief keeping each target's posterior over its poses across "
+        "its copies (session 45, screened, off; docs/model.md, Copies that share one k_c)",
     )
     copy_weights: Literal["equal", "poses", "input", "tracked"] = Field(
         "poses",

@@ -86,6 +86,11 @@ class Belief:
     """Where the user last drove the gripper (m, base frame): its position at the last input sample that
     translated (``None``: no input yet). A turn's charge (``intent.turn_charge``) is measured from here, not
     from where the gripper is: assistance moves the gripper while the user turns (docs/model.md)."""
+    pose_joint_log_w: FloatArray | None = None
+    """``intent.copy_reach = "pooled"`` under a tracked reach: each target's posterior over all its grasp
+    poses from the input, whichever copy holds them, ``(G, K)`` log-probabilities normalised per target
+    (``-inf`` on padding): Bayes from uniform over the target's poses, never split by a resampling, which
+    only deals the poses out to the copies; ``None``: not kept."""
 
     def __post_init__(self) -> None:
         lp = np.array(self.log_p, dtype=float)
@@ -126,12 +131,14 @@ class Belief:
         return self.goals.target_probabilities(self.probs)
 
     def _with(self, log_p: FloatArray, confirmed: str | None = None, ruled_out: frozenset[str] = frozenset(),
-              pose_log_w: FloatArray | None = None, anchor: FloatArray | None = None) -> Belief:
+              pose_log_w: FloatArray | None = None, anchor: FloatArray | None = None,
+              pose_joint_log_w: FloatArray | None = None) -> Belief:
         """A belief over the same goals with ``log_p``, the answers so far plus the new ones, and the pose
         weights and anchor (``None``: the current ones)."""
         return Belief(self.goals, log_p, confirmed or self.confirmed, self.ruled_out | ruled_out,
                       self.pose_log_w if pose_log_w is None else pose_log_w,
-                      self.anchor if anchor is None else anchor)
+                      self.anchor if anchor is None else anchor,
+                      self.pose_joint_log_w if pose_joint_log_w is None else pose_joint_log_w)
 
     def pose_weights(self) -> FloatArray:
         """Each goal's log-weights over its grasp poses from the input so far, ``(G, K)`` (:attr:`pose_log_w`)."""
@@ -140,6 +147,36 @@ class Belief:
         mask = self.goals.pose_mask
         with np.errstate(divide="ignore"):
             return np.where(mask, -np.log(mask.sum(axis=1, keepdims=True)), -np.inf)
+
+    @property
+    def reach_log_w(self) -> FloatArray | None:
+        """The pose log-weights the tracked reach picks each goal's pose by
+        (:meth:`~.model.SharedAutonomyModel.reach_poses`): :attr:`pose_joint_log_w` where kept, else
+        :attr:`pose_log_w`."""
+        return self.pose_log_w if self.pose_joint_log_w is None else self.pose_joint_log_w
+
+    def pose_joint_weights(self) -> FloatArray:
+        """Each target's log posterior over all its grasp poses, laid out over its copies' poses ``(G, K)``
+        (:attr:`pose_joint_log_w`; uniform over the target's poses when not kept)."""
+        if self.pose_joint_log_w is not None:
+            return self.pose_joint_log_w
+        mask = self.goals.pose_mask
+        per_target = np.bincount(self.goals.target_index, weights=mask.sum(axis=1))[self.goals.target_index]
+        with np.errstate(divide="ignore"):
+            return np.where(mask, -np.log(per_target)[:, None], -np.inf)
+
+    def _per_target(self, log_w: FloatArray) -> FloatArray:
+        """``(G, K)`` pose log-weights normalised over each target's poses across its copies, each held
+        within :data:`LOG_FLOOR` of its target's largest (read-only)."""
+        out = np.array(log_w, dtype=float)
+        for t in range(len(self.goals.targets)):
+            rows = self.goals.target_index == t
+            block = out[rows]
+            m = self.goals.pose_mask[rows]
+            block[m] = _log_normalised(block[m])
+            out[rows] = block
+        out.setflags(write=False)
+        return out
 
     def _normalised(self, log_p: FloatArray, cap: float, among: np.ndarray | None = None) -> FloatArray:
         log_p = log_p - log_sum_exp(log_p)
@@ -172,7 +209,7 @@ class Belief:
         """
         u = _check_finite("user_twist", user_twist, (6,))
         positions, quats = self.goals.positions, self.goals.quats_wxyz
-        pose_log_w = None
+        pose_log_w = joint = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
         if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights in INPUT_COPY_WEIGHTS:
             # Bayes over each goal's poses, from uniform, along the whole input
@@ -181,6 +218,8 @@ class Belief:
             tracked_nll = mixture_nll(log_w, per)
             pose_log_w = log_w - per + tracked_nll[:, None]  # normalised per goal: sum_k w_k e^-per_k = e^-nll
             pose_log_w.setflags(write=False)
+            if cfg.copy_reach == "pooled":  # the same Bayes over each target's poses, across its copies
+                joint = self._per_target(self.pose_joint_weights() - per)
         if cfg.poses == "nearest":
             nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, positions, quats, cfg,
                                               cfg.rotation_scale, anchor)
@@ -190,14 +229,15 @@ class Belief:
             nll = tracked_nll
         free = self._competing()
         if free is None:
-            return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w, anchor=anchor)
+            return self._with(self._normalised(self.log_p - nll, cfg.cap), pose_log_w=pose_log_w, anchor=anchor,
+                              pose_joint_log_w=joint)
         # Only the free goals compete, within their joint probability; answered targets keep theirs.
         lp = np.array(self.log_p)
         inner = lp[free] - nll[free]
         lp[free] = log_sum_exp(lp[free]) + inner - log_sum_exp(inner)
         if self.confirmed is None:
             lp = self._normalised(lp, cfg.cap, free)
-        return self._with(lp, pose_log_w=pose_log_w, anchor=anchor)
+        return self._with(lp, pose_log_w=pose_log_w, anchor=anchor, pose_joint_log_w=joint)
 
     def answer_likelihood(self, target: str, yes: bool, p_correct: float) -> FloatArray:
         """``P(answer | g)`` for every goal when ``target`` was asked (section III-D)."""
@@ -215,13 +255,15 @@ class Belief:
     def without_confirmation(self) -> Belief:
         """This belief with its "yes" withdrawn (``asking.withdraw_yes_s``): the same probabilities, the
         "no" answers kept, and joystick input free again to move the confirmed target's total."""
-        return Belief(self.goals, self.log_p, None, self.ruled_out, self.pose_log_w, self.anchor)
+        return Belief(self.goals, self.log_p, None, self.ruled_out, self.pose_log_w, self.anchor,
+                      self.pose_joint_log_w)
 
     def without_denials(self) -> Belief:
         """This belief with its "no" answers withdrawn (``asking.withdraw_no_s``): the same probabilities
         (a denied target keeps the small share its answer left it) and joystick input free again to move
         every target; a "yes" is kept."""
-        return Belief(self.goals, self.log_p, self.confirmed, frozenset(), self.pose_log_w, self.anchor)
+        return Belief(self.goals, self.log_p, self.confirmed, frozenset(), self.pose_log_w, self.anchor,
+                      self.pose_joint_log_w)
 
     def siblings(self, target: str) -> list[str]:
         """The other targets (grasp types) of ``target``'s object."""
@@ -283,12 +325,14 @@ class Belief:
         pools = self._pose_pools()
         keep = cfg.copy_weights in INPUT_COPY_WEIGHTS or cfg.keep_pose_posterior
         log_post = self._pose_pool_log_posteriors() if keep else None
+        joint_pool = self._pose_pool_joint() if self.pose_joint_log_w is not None else None
         first = {}
         for g in self.goals.goals:
             first.setdefault(g.target, g)
         goals: list[Goal] = []
         probs: list[float] = []
         inner: list[FloatArray] = []  # when kept: each new copy's log posterior over its own poses
+        joint: list[FloatArray] = []  # when kept: the target's posterior over its poses, dealt out to its copies
         for t in self.goals.targets:
             template, n = first[t], alloc[t]
             poses = pools[t]
@@ -313,12 +357,22 @@ class Belief:
                 probs.append(tp[t] / n if share is None else tp[t] * share[own].sum())
                 if log_post is not None:
                     inner.append(_log_normalised(log_post[t][own]))
+                if joint_pool is not None:
+                    joint.append(joint_pool[t][own])
         out = Belief.from_probs(GoalSet(tuple(goals)), np.array(probs))
         # each copy's weights over its own poses start uniform (when kept: INPUT_COPY_WEIGHTS or
         # keep_pose_posterior, their posterior)
         return Belief(out.goals, out.log_p, self.confirmed, self.ruled_out,
                       pose_log_w=None if log_post is None else _padded(inner, out.goals.pose_mask),
-                      anchor=self.anchor)
+                      anchor=self.anchor,
+                      pose_joint_log_w=None if joint_pool is None else _padded(joint, out.goals.pose_mask))
+
+    def _pose_pool_joint(self) -> dict[str, FloatArray]:
+        """Each target's :attr:`pose_joint_log_w` in :meth:`_pose_pools`' order."""
+        pools: dict[str, list[FloatArray]] = {t: [] for t in self.goals.targets}
+        for i, g in enumerate(self.goals.goals):
+            pools[g.target].append(self.pose_joint_log_w[i, :len(g.poses)])
+        return {t: np.concatenate(parts) for t, parts in pools.items()}
 
     def _pose_pool_log_posteriors(self) -> dict[str, FloatArray]:
         """Each target's log posterior over its grasp poses, in :meth:`_pose_pools`' order: a copy's

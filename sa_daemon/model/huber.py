@@ -169,14 +169,22 @@ def pose_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goa
                                           distances, anchor).reshape(G, K)
 
 
+def tracker_pose_values(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
+                        cfg: IntentConfig, distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
+    """``V_k = beta huber(d_trans) + beta_r huber(d_rot)`` of each goal's poses ``(G, K, ...)`` at the gripper's
+    pose (m, wxyz), as the tracker weighs them (dimensionless, ``(G, K)``); ``distances`` as in
+    :func:`pose_log_weights`, whose weights are ``exp(-V_k)`` normalised per goal."""
+    d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
+    return cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
+
+
 def pose_log_weights(position: FloatArray, quat: FloatArray, goal_positions: FloatArray, goal_quats: FloatArray,
                      cfg: IntentConfig, distances: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``log w_k``, ``w_k = exp(-V_k) / sum_j exp(-V_j)`` over each goal's poses ``(G, K, ...)`` at the
     gripper's pose, ``V`` weighed like :func:`pose_nll` (padding, far away, weighs nothing). ``(G, K)``.
     ``distances``: :func:`pose_distances`, if the caller has them (a batch ``(..., G, K)`` each gives
     ``(..., G, K)``)."""
-    d_t, d_r = pose_distances(position, quat, goal_positions, goal_quats) if distances is None else distances
-    v = cfg.rationality * huber_value(d_t, cfg.translation) + cfg.rotation_rationality * huber_value(d_r, cfg.rotation)
+    v = tracker_pose_values(position, quat, goal_positions, goal_quats, cfg, distances)
     v = v - v.min(axis=-1, keepdims=True)
     return -v - np.log(np.sum(np.exp(-v), axis=-1, keepdims=True))
 

@@ -20,7 +20,7 @@ from ..geometry import FloatArray, Pose, quat_angle
 from ..world.goalset import GoalSet
 from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
-from .huber import tracked_pose_scores
+from .huber import tracked_pose_scores, tracker_pose_values
 from .methods import MethodSpec, method_spec
 from .reward import opposes
 from .twists import blend, ho_robot_twist, move_twist
@@ -198,7 +198,7 @@ class SharedAutonomyModel:
         (``probs``, ``(G,)``; ties and ``None``: the first copy)."""
         w = self.cfg.intent.rotation_weight_m_per_rad
         share = self.cfg.intent.copy_reach
-        if share == "own":
+        if share in ("own", "pooled"):  # pooled: a tracked reach's only
             return goals.desired_poses(pose, w)
         if share == "target":
             return goals.desired_poses(pose, w, goals.desired_distances(pose, w))
@@ -213,8 +213,10 @@ class SharedAutonomyModel:
         :attr:`~.belief.Belief.pose_log_w`, ``None``: no input yet), shared among the copies of one target as
         ``intent.copy_reach`` says: ``own`` each copy its own; ``target`` the pose of highest score over all
         the target's copies, each copy's scores (:func:`~.huber.tracked_pose_scores`) plus its log
-        probability (``probs``, ``(G,)``; ``None``: equal), i.e. the target's pooled posterior over its poses
-        times ``exp(-V)``; ``likeliest`` the tracked pose of the target's most probable copy. ``None`` with
+        probability (``probs``, ``(G,)``; ``None``: equal): ``argmax P(g) P(k | g, input) w_k(x | g)`` over
+        the copies ``g`` and their poses ``k``, the weights normalised over each copy's own poses; ``likeliest`` the tracked pose of the target's most probable copy; ``pooled`` the pose of highest ``P(k | target,
+        input) exp(-V_k)`` over all the target's poses, ``pose_log_w`` then the target's posterior
+        (:attr:`~.belief.Belief.reach_log_w`). ``None`` with
         ``"closest"``: the moves and the planner's rollouts take ``k_c`` (:meth:`desired_poses`) and HO each
         goal's lowest-value pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives
         these to a move only.)"""
@@ -226,6 +228,10 @@ class SharedAutonomyModel:
         score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
                                     self.cfg.intent)
         share = self.cfg.intent.copy_reach
+        if share == "pooled":  # pose_log_w: the target's posterior over its poses (Belief.reach_log_w)
+            score = np.asarray(pose_log_w) - tracker_pose_values(pose.position, pose.quat_wxyz, goals.positions,
+                                                                 goals.quats_wxyz, self.cfg.intent)
+            return goals.poses_at(np.argmax(score, axis=1), -np.max(score, axis=1))
         p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
         if share == "own":
             lender = None
