@@ -94,7 +94,7 @@ class IntentConfig(_Section):
         "and each goal's lowest-value pose for HO; tracked = the tracked pose for HO too (docs/model.md, One "
         "grasp pose for HO, the moves and the rollouts)",
     )
-    copy_reach: Literal["own", "target", "likeliest", "pooled"] = Field(
+    copy_reach: Literal["own", "target", "likeliest", "pooled", "ranked"] = Field(
         "own",
         description="which grasp pose the copies resampling makes of one target (section III-G) are driven to "
         "and scored at, by the moves and the planner's rollouts: own = each copy its own (each copy a goal of "
@@ -104,7 +104,9 @@ class IntentConfig(_Section):
         "over its own poses (session 45, screened, off); likeliest = the k_c (or tracked pose) of the "
         "target's most probable copy; pooled = with a tracked reach, the pose of highest P(pose | target, input) "
         "exp(-V) over all the target's poses, the belief keeping each target's posterior over its poses across "
-        "its copies (session 45, screened, off; docs/model.md, Copies that share one k_c)",
+        "its copies; ranked = each copy its own tracked pose, and the planner deals each target's probability to its "
+        "copies by that posterior times exp(-V) over their poses (the belief's own as copy_weights says) "
+        "(pooled and ranked: session 45, screened, off; docs/model.md, Copies that share one k_c)",
     )
     copy_weights: Literal["equal", "poses", "input", "tracked"] = Field(
         "poses",

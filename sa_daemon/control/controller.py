@@ -290,10 +290,10 @@ class Controller:
             return None
         b = self._belief
         cap = self._cfg.asking.max_per_task
-        snap = Snapshot(b.goals, b.probs, pose, self.user_twist, self._mode, frozenset(self._asked),
+        snap = Snapshot(b.goals, self._model.planning_probs(b, pose), pose, self.user_twist, self._mode, frozenset(self._asked),
                         self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
                         questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor,
-                        pose_log_w=b.reach_log_w, question_time_s=self._answer_time.charged_s)
+                        pose_log_w=self._model.reach_log_w(b), question_time_s=self._answer_time.charged_s)
         self._issued[snap] = self._task
         return snap
 
@@ -419,7 +419,7 @@ class Controller:
         error = None
         b = self._belief
         try:
-            reach = self._model.reach_poses(b.goals, state.pose, b.reach_log_w, b.probs)
+            reach = self._model.reach_poses(b.goals, state.pose, self._model.reach_log_w(b), b.probs)
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             has_input = fresh and bool(np.any(u))
             self._withdraw_answers_if_opposed(t, cmd, has_input)

@@ -60,6 +60,10 @@ INPUT_COPY_WEIGHTS = ("input", "tracked")
 """The ``intent.copy_weights`` that read the input's posterior over the grasp poses: the belief keeps that
 posterior (:attr:`Belief.pose_log_w`) and carries it through a resampling."""
 
+JOINT_COPY_REACHES = ("pooled", "ranked")
+"""The ``intent.copy_reach`` that read each target's posterior over all its poses across its copies: the
+belief keeps it (:attr:`Belief.pose_joint_log_w`)."""
+
 
 @dataclass(frozen=True, eq=False)
 class Belief:
@@ -87,7 +91,7 @@ class Belief:
     translated (``None``: no input yet). A turn's charge (``intent.turn_charge``) is measured from here, not
     from where the gripper is: assistance moves the gripper while the user turns (docs/model.md)."""
     pose_joint_log_w: FloatArray | None = None
-    """``intent.copy_reach = "pooled"`` under a tracked reach: each target's posterior over all its grasp
+    """``intent.copy_reach`` ``"pooled"`` or ``"ranked"`` (:data:`JOINT_COPY_REACHES`): each target's posterior over all its grasp
     poses from the input, whichever copy holds them, ``(G, K)`` log-probabilities normalised per target
     (``-inf`` on padding): Bayes from uniform over the target's poses, never split by a resampling, which
     only deals the poses out to the copies; ``None``: not kept."""
@@ -147,13 +151,6 @@ class Belief:
         mask = self.goals.pose_mask
         with np.errstate(divide="ignore"):
             return np.where(mask, -np.log(mask.sum(axis=1, keepdims=True)), -np.inf)
-
-    @property
-    def reach_log_w(self) -> FloatArray | None:
-        """The pose log-weights the tracked reach picks each goal's pose by
-        (:meth:`~.model.SharedAutonomyModel.reach_poses`): :attr:`pose_joint_log_w` where kept, else
-        :attr:`pose_log_w`."""
-        return self.pose_log_w if self.pose_joint_log_w is None else self.pose_joint_log_w
 
     def pose_joint_weights(self) -> FloatArray:
         """Each target's log posterior over all its grasp poses, laid out over its copies' poses ``(G, K)``
@@ -218,7 +215,7 @@ class Belief:
             tracked_nll = mixture_nll(log_w, per)
             pose_log_w = log_w - per + tracked_nll[:, None]  # normalised per goal: sum_k w_k e^-per_k = e^-nll
             pose_log_w.setflags(write=False)
-            if cfg.copy_reach == "pooled":  # the same Bayes over each target's poses, across its copies
+            if cfg.copy_reach in JOINT_COPY_REACHES:  # the same Bayes over each target's poses, across its copies
                 joint = self._per_target(self.pose_joint_weights() - per)
         if cfg.poses == "nearest":
             nll = cfg.rationality * q_minus_v(pose.position, pose.quat_wxyz, u, positions, quats, cfg,

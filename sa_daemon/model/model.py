@@ -216,7 +216,7 @@ class SharedAutonomyModel:
         probability (``probs``, ``(G,)``; ``None``: equal): ``argmax P(g) P(k | g, input) w_k(x | g)`` over
         the copies ``g`` and their poses ``k``, the weights normalised over each copy's own poses; ``likeliest`` the tracked pose of the target's most probable copy; ``pooled`` the pose of highest ``P(k | target,
         input) exp(-V_k)`` over all the target's poses, ``pose_log_w`` then the target's posterior
-        (:attr:`~.belief.Belief.reach_log_w`). ``None`` with
+        (:meth:`reach_log_w`). ``None`` with
         ``"closest"``: the moves and the planner's rollouts take ``k_c`` (:meth:`desired_poses`) and HO each
         goal's lowest-value pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives
         these to a move only.)"""
@@ -228,7 +228,7 @@ class SharedAutonomyModel:
         score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
                                     self.cfg.intent)
         share = self.cfg.intent.copy_reach
-        if share == "pooled":  # pose_log_w: the target's posterior over its poses (Belief.reach_log_w)
+        if share == "pooled":  # pose_log_w: the target's posterior over its poses (reach_log_w)
             score = np.asarray(pose_log_w) - tracker_pose_values(pose.position, pose.quat_wxyz, goals.positions,
                                                                  goals.quats_wxyz, self.cfg.intent)
             return goals.poses_at(np.argmax(score, axis=1), -np.max(score, axis=1))
@@ -241,6 +241,34 @@ class SharedAutonomyModel:
         else:
             lender = -p
         return goals.poses_at(np.argmax(score, axis=1), lender)
+
+    def reach_log_w(self, belief: Belief) -> FloatArray | None:
+        """The pose log-weights :meth:`reach_poses` picks each goal's pose by: each target's posterior over
+        its poses across its copies (:attr:`~.belief.Belief.pose_joint_log_w`) under ``intent.copy_reach =
+        "pooled"``, else each goal's over its own (:attr:`~.belief.Belief.pose_log_w`)."""
+        if self.cfg.intent.copy_reach == "pooled" and belief.pose_joint_log_w is not None:
+            return belief.pose_joint_log_w
+        return belief.pose_log_w
+
+    def planning_probs(self, belief: Belief, pose: Pose) -> FloatArray:
+        """The goals' probabilities the planner plans with ``(G,)``: the belief's, except under
+        ``intent.copy_reach = "ranked"``, where each target keeps its probability and deals it to its copies
+        as ``sum_k P(k | target, input) exp(-V_k(x))`` over each copy's poses ``k``
+        (:attr:`~.belief.Belief.pose_joint_log_w`, ``V`` at the gripper's ``pose``): the copies are weighed
+        by what the input says of the pose, while the belief's own (``intent.copy_weights``) keep the
+        target's likelihood of the next input as it was."""
+        if self.cfg.intent.copy_reach != "ranked" or belief.pose_joint_log_w is None:
+            return belief.probs
+        goals = belief.goals
+        score = belief.pose_joint_log_w - tracker_pose_values(pose.position, pose.quat_wxyz, goals.positions,
+                                                              goals.quats_wxyz, self.cfg.intent)
+        top = np.max(score, axis=1)
+        log_share = top + np.log(np.sum(np.exp(score - top[:, None]), axis=1))
+        share = np.exp(log_share - np.max(log_share))
+        ti = goals.target_index
+        within = share / np.bincount(ti, weights=share)[ti]
+        probs = goals.target_sums(belief.probs)[ti] * within
+        return probs / probs.sum()
 
     def robot_twist(
         self, action: Action, goals: GoalSet, probs: FloatArray, pose: Pose, user_twist: FloatArray,
