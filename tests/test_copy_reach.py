@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from sa_daemon.config import ConfigError, IntentConfig, config_from_dict
+from sa_daemon.control.controller import Controller
 from sa_daemon.geometry import Pose
 from sa_daemon.model.actions import Action, ActionKind
 from sa_daemon.model.belief import Belief
@@ -289,3 +290,44 @@ def test_the_pooled_reach_with_no_input_is_the_targets_pose_of_least_value():
     assert b.pose_joint_log_w is None
     m = SharedAutonomyModel(config_from_dict({"intent": {"copy_reach": "pooled"}}))
     assert reach_dx(m, b) == [2.0, 2.0, 2.0]
+
+
+# -- ranked: each copy its own pose, the planner weighing the copies by the pooled posterior --------------
+
+RANKED = config_from_dict({"intent": {"copy_reach": "ranked"}})
+
+
+def test_ranked_deals_each_target_to_its_copies_by_what_the_input_says_of_the_pose():
+    """After input toward the fan's +5 cm pose the belief (pose-weighted copies) favours another copy of
+    ``a:top``; the planner's probabilities make the copy that owns +5 cm the likeliest, and keep every
+    target's total."""
+    b = driven_with_resampling(RANKED.intent)[-1]
+    idx = copies(b.goals)
+    assert len(idx) > 1
+    owner = next(i for i in idx if 5.0 in [aside_cm(p) for p in b.goals.goals[i].poses])
+    assert idx[np.argmax(b.probs[idx])] != owner  # the belief's likeliest copy is another one
+    planned = SharedAutonomyModel(RANKED).planning_probs(b, GRIPPER)
+    assert idx[np.argmax(planned[idx])] == owner
+    assert planned[owner] / planned[idx].sum() > 1.15 * b.probs[owner] / b.probs[idx].sum()
+    np.testing.assert_allclose(b.goals.target_sums(planned), b.goals.target_sums(b.probs), atol=1e-12)
+    # each copy is still driven to its own tracked pose
+    m = SharedAutonomyModel(RANKED)
+    assert m.reach_log_w(b) is b.pose_log_w
+    assert len(set(reach_aside(m, b))) == len(idx)
+
+
+def test_other_copy_reaches_plan_with_the_beliefs_probabilities():
+    for reach in ("own", "pooled"):
+        cfg = config_from_dict({"intent": {"copy_reach": reach}})
+        b = driven_with_resampling(cfg.intent)[-1]
+        assert SharedAutonomyModel(cfg).planning_probs(b, GRIPPER) is b.probs
+
+
+def test_the_controller_plans_with_the_ranked_probabilities():
+    b = driven_with_resampling(RANKED.intent)[-1]
+    ctl = Controller(RANKED, fan(), "policy", 0.01)
+    ctl._belief = b  # the driven belief, as if the controller's own input had made it
+    snap = ctl.snapshot(GRIPPER, budget_s=None, node_budget=50)
+    assert snap is not None
+    np.testing.assert_allclose(snap.probs, SharedAutonomyModel(RANKED).planning_probs(b, GRIPPER), atol=1e-12)
+    assert not np.allclose(snap.probs, b.probs)

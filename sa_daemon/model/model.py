@@ -198,7 +198,7 @@ class SharedAutonomyModel:
         (``probs``, ``(G,)``; ties and ``None``: the first copy)."""
         w = self.cfg.intent.rotation_weight_m_per_rad
         share = self.cfg.intent.copy_reach
-        if share in ("own", "pooled"):  # pooled: a tracked reach's only
+        if share in ("own", "pooled", "ranked"):  # pooled, ranked: a tracked reach's
             return goals.desired_poses(pose, w)
         if share == "target":
             return goals.desired_poses(pose, w, goals.desired_distances(pose, w))
@@ -233,7 +233,7 @@ class SharedAutonomyModel:
                                                                  goals.quats_wxyz, self.cfg.intent)
             return goals.poses_at(np.argmax(score, axis=1), -np.max(score, axis=1))
         p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
-        if share == "own":
+        if share in ("own", "ranked"):
             lender = None
         elif share == "target":
             with np.errstate(divide="ignore"):
