@@ -23,7 +23,9 @@ def _log(w: FloatArray) -> FloatArray:
 class Snapshot:
     """Everything the planner needs, frozen at one instant.
 
-    ``user_twist`` is the user's last commanded twist (m/s, rad/s), already holding only the components of
+    ``probs`` are the goals' probabilities the planner plans with
+    (:meth:`~..model.model.SharedAutonomyModel.planning_probs`: the belief's, unless ``intent.copy_reach =
+    "ranked"``). ``user_twist`` is the user's last commanded twist (m/s, rad/s), already holding only the components of
     ``mode``; ``user_speed`` the user's smoothed speed ``(linear m/s, angular rad/s)``, which the watch
     model's predicted user twists use (``None``: the norms of ``user_twist``); ``asked`` the high-level targets already asked about in this task. ``budget_s`` is the
     wall-clock deadline (``None``: no deadline) and ``node_budget`` a deterministic cap on expanded
@@ -34,7 +36,8 @@ class Snapshot:
     tracker measures a turn's charge (``None``: at ``pose``, as a belief that has seen no input).
     ``pose_log_w``: each goal's posterior over its grasp poses, ``(G, K)`` log-weights
     (:attr:`~..model.belief.Belief.pose_log_w`; ``None``: uniform), from which the goals' poses are
-    taken under ``intent.reach_pose = "tracked"``. ``question_time_s``: how long a question would stop the
+    taken under a tracked ``intent.reach_pose`` (under ``intent.copy_reach = "pooled"`` each target's
+    posterior over its poses across its copies: :meth:`~..model.model.SharedAutonomyModel.reach_log_w`). ``question_time_s``: how long a question would stop the
     arm for this person (s, :class:`~..control.answer_time.AnswerTime`; ``None``: ``reward.question_time_s``).
     """
 
