@@ -290,10 +290,11 @@ class Controller:
             return None
         b = self._belief
         cap = self._cfg.asking.max_per_task
-        snap = Snapshot(b.goals, self._model.planning_probs(b, pose), pose, self.user_twist, self._mode, frozenset(self._asked),
-                        self._method, budget_s=budget_s, node_budget=node_budget, user_speed=self.user_speed,
-                        questions_left=max(0, cap - len(self._asked)) if cap else None, anchor=b.anchor,
-                        pose_log_w=self._model.reach_log_w(b), question_time_s=self._answer_time.charged_s)
+        snap = Snapshot(b.goals, self._model.planning_probs(b, pose), pose, self.user_twist, self._mode,
+                        frozenset(self._asked), self._method, budget_s=budget_s, node_budget=node_budget,
+                        user_speed=self.user_speed, questions_left=max(0, cap - len(self._asked)) if cap else None,
+                        anchor=b.anchor, pose_log_w=self._model.reach_log_w(b),
+                        question_time_s=self._answer_time.charged_s)
         self._issued[snap] = self._task
         return snap
 

@@ -91,8 +91,9 @@ class Belief:
     translated (``None``: no input yet). A turn's charge (``intent.turn_charge``) is measured from here, not
     from where the gripper is: assistance moves the gripper while the user turns (docs/model.md)."""
     pose_joint_log_w: FloatArray | None = None
-    """``intent.copy_reach`` ``"pooled"`` or ``"ranked"`` (:data:`JOINT_COPY_REACHES`): each target's posterior over all its grasp
-    poses from the input, whichever copy holds them, ``(G, K)`` log-probabilities normalised per target
+    """``intent.copy_reach`` ``"pooled"`` or ``"ranked"`` (:data:`JOINT_COPY_REACHES`): each target's
+    posterior over all its grasp poses from the input, whichever copy holds them, ``(G, K)``
+    log-probabilities normalised per target
     (``-inf`` on padding): Bayes from uniform over the target's poses, never split by a resampling, which
     only deals the poses out to the copies; ``None``: not kept."""
 

@@ -211,34 +211,37 @@ class SharedAutonomyModel:
         ``intent.reach_pose`` is ``"tracked"`` or ``"tracked_moves"``: the pose the input since the last
         resampling points at (:func:`~.huber.tracked_goal_poses`; ``pose_log_w`` the belief's
         :attr:`~.belief.Belief.pose_log_w`, ``None``: no input yet), shared among the copies of one target as
-        ``intent.copy_reach`` says: ``own`` each copy its own; ``target`` the pose of highest score over all
-        the target's copies, each copy's scores (:func:`~.huber.tracked_pose_scores`) plus its log
-        probability (``probs``, ``(G,)``; ``None``: equal): ``argmax P(g) P(k | g, input) w_k(x | g)`` over
-        the copies ``g`` and their poses ``k``, the weights normalised over each copy's own poses; ``likeliest`` the tracked pose of the target's most probable copy; ``pooled`` the pose of highest ``P(k | target,
-        input) exp(-V_k)`` over all the target's poses, ``pose_log_w`` then the target's posterior
-        (:meth:`reach_log_w`). ``None`` with
-        ``"closest"``: the moves and the planner's rollouts take ``k_c`` (:meth:`desired_poses`) and HO each
-        goal's lowest-value pose, as they always have. (Under ``"tracked_moves"`` :meth:`robot_twist` gives
-        these to a move only.)"""
+        ``intent.copy_reach`` says:
+
+        * ``own`` and ``ranked``: each copy its own;
+        * ``target``: the pose of highest ``P(g) P(k | g, input) w_k(x | g)`` over the target's copies ``g``
+          and their poses ``k`` (:func:`~.huber.tracked_pose_scores` plus ``log probs``; ``probs`` ``(G,)``,
+          ``None``: equal), the weights ``w`` normalised over each copy's own poses;
+        * ``likeliest``: the tracked pose of the target's most probable copy;
+        * ``pooled``: the pose of highest ``P(k | target, input) exp(-V_k)`` over all the target's poses,
+          ``pose_log_w`` then the target's posterior (:meth:`reach_log_w`).
+
+        ``None`` with ``"closest"``: the moves and the planner's rollouts take ``k_c`` (:meth:`desired_poses`)
+        and HO each goal's lowest-value pose, as they always have. (Under ``"tracked_moves"``
+        :meth:`robot_twist` gives these to a move only.)"""
         if self.cfg.intent.reach_pose == "closest":
             return None
         if pose_log_w is None:
             with np.errstate(divide="ignore"):
                 pose_log_w = np.log(goals.pose_mask.astype(float))
-        score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
-                                    self.cfg.intent)
         share = self.cfg.intent.copy_reach
         if share == "pooled":  # pose_log_w: the target's posterior over its poses (reach_log_w)
             score = np.asarray(pose_log_w) - tracker_pose_values(pose.position, pose.quat_wxyz, goals.positions,
                                                                  goals.quats_wxyz, self.cfg.intent)
             return goals.poses_at(np.argmax(score, axis=1), -np.max(score, axis=1))
+        score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
+                                    self.cfg.intent)
         p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
-        if share in ("own", "ranked"):
-            lender = None
-        elif share == "target":
+        lender = None  # own, ranked
+        if share == "target":
             with np.errstate(divide="ignore"):
                 lender = -(np.max(score, axis=1) + np.log(p))
-        else:
+        elif share == "likeliest":
             lender = -p
         return goals.poses_at(np.argmax(score, axis=1), lender)
 
@@ -256,7 +259,8 @@ class SharedAutonomyModel:
         as ``sum_k P(k | target, input) exp(-V_k(x))`` over each copy's poses ``k``
         (:attr:`~.belief.Belief.pose_joint_log_w`, ``V`` at the gripper's ``pose``): the copies are weighed
         by what the input says of the pose, while the belief's own (``intent.copy_weights``) keep the
-        target's likelihood of the next input as it was."""
+        target's likelihood of the next input as it was. (The controller's HO still pulls by the
+        belief's.)"""
         if self.cfg.intent.copy_reach != "ranked" or belief.pose_joint_log_w is None:
             return belief.probs
         goals = belief.goals
