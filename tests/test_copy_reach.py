@@ -324,10 +324,15 @@ def test_other_copy_reaches_plan_with_the_beliefs_probabilities():
 
 
 def test_the_controller_plans_with_the_ranked_probabilities():
-    b = driven_with_resampling(RANKED.intent)[-1]
+    """The controller's own input (toward the fan's +5 cm pose) splits ``a:top``; its snapshot then carries
+    the ranked probabilities, not the belief's."""
     ctl = Controller(RANKED, fan(), "policy", 0.01)
-    ctl._belief = b  # the driven belief, as if the controller's own input had made it
+    for i in range(60):
+        t = 0.01 * i
+        assert ctl.on_input(np.array([1.0, 0.5, 0.0]), t)  # +x, +y: toward the +5 cm pose, 10 cm ahead
+        ctl.update_belief(GRIPPER, t)
+    b = ctl.belief
+    assert len(copies(b.goals)) > 1 and b.pose_joint_log_w is not None
     snap = ctl.snapshot(GRIPPER, budget_s=None, node_budget=50)
-    assert snap is not None
     np.testing.assert_allclose(snap.probs, SharedAutonomyModel(RANKED).planning_probs(b, GRIPPER), atol=1e-12)
     assert not np.allclose(snap.probs, b.probs)
