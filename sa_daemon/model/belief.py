@@ -367,23 +367,20 @@ class Belief:
 
     def _pose_pool_joint(self) -> dict[str, FloatArray]:
         """Each target's :attr:`pose_joint_log_w` in :meth:`_pose_pools`' order."""
+        return self._by_target(self.pose_joint_log_w)
+
+    def _by_target(self, log_w: FloatArray) -> dict[str, FloatArray]:
+        """``(G, K)`` per-pose rows concatenated per target, in :meth:`_pose_pools`' order (padding dropped)."""
         pools: dict[str, list[FloatArray]] = {t: [] for t in self.goals.targets}
         for i, g in enumerate(self.goals.goals):
-            pools[g.target].append(self.pose_joint_log_w[i, :len(g.poses)])
+            pools[g.target].append(log_w[i, :len(g.poses)])
         return {t: np.concatenate(parts) for t, parts in pools.items()}
 
     def _pose_pool_log_posteriors(self) -> dict[str, FloatArray]:
         """Each target's log posterior over its grasp poses, in :meth:`_pose_pools`' order: a copy's
         probability times its posterior over its own poses (:attr:`pose_log_w`), normalised per target."""
-        log_w = self.pose_weights() + self.log_p[:, None]
-        pools: dict[str, list[FloatArray]] = {t: [] for t in self.goals.targets}
-        for i, g in enumerate(self.goals.goals):
-            pools[g.target].append(log_w[i, :len(g.poses)])
-        out = {}
-        for t, parts in pools.items():
-            lw = np.concatenate(parts)
-            out[t] = _log_normalised(lw)
-        return out
+        pooled = self._by_target(self.pose_weights() + self.log_p[:, None])
+        return {t: _log_normalised(lw) for t, lw in pooled.items()}
 
 
 LOG_FLOOR = 745.0

@@ -236,13 +236,11 @@ class SharedAutonomyModel:
             return goals.poses_at(np.argmax(score, axis=1), -np.max(score, axis=1))
         score = tracked_pose_scores(pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, pose_log_w,
                                     self.cfg.intent)
-        p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
         lender = None  # own, ranked
-        if share == "target":
+        if share in ("target", "likeliest"):
+            p = np.full(len(goals), 1.0 / len(goals)) if probs is None else np.asarray(probs, dtype=float)
             with np.errstate(divide="ignore"):
-                lender = -(np.max(score, axis=1) + np.log(p))
-        elif share == "likeliest":
-            lender = -p
+                lender = -(np.max(score, axis=1) + np.log(p)) if share == "target" else -p
         return goals.poses_at(np.argmax(score, axis=1), lender)
 
     def reach_log_w(self, belief: Belief) -> FloatArray | None:
