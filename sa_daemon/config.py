@@ -67,11 +67,18 @@ class IntentConfig(_Section):
         description="beta of the rotation part of Q_g - V_g (rotation-mode input), per input sample; rationality "
         "weighs the translation part (docs/model.md, The tracker)",
     )
-    poses: Literal["nearest", "marginal", "tracked"] = Field(
+    poses: Literal["nearest", "marginal", "tracked", "switching"] = Field(
         "marginal",
         description="a goal with several grasp poses: nearest = V and Q from its lowest-value pose (Javdani's); "
         "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
-        "goal's posterior over its poses from the input so far (docs/model.md, The tracker)",
+        "goal's posterior over its poses from the input so far; switching = that posterior with the pose "
+        "free to change at every sample (pose_switch; session 46, off; docs/model.md, The tracker)",
+    )
+    pose_switch: float = Field(
+        0.025, ge=0, le=1,
+        description="poses = switching: the probability, per input sample, that the user's grasp pose is drawn "
+        "afresh from the weights exp(-V) before the sample is read (0 = tracked, 1 = marginal); 0.025 = a "
+        "memory of about 1 s at 40 samples a second",
     )
     user_standoff_m: float = Field(
         0.06, ge=0, le=0.3,

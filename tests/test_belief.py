@@ -787,6 +787,55 @@ def test_tracked_poses_let_a_goal_keep_the_evidence_of_the_pose_the_user_heads_t
     assert gained == pytest.approx(bowl - one_pose, abs=0.01)
 
 
+SWITCHING = MARGINAL.model_copy(update={"poses": "switching"})
+
+
+def test_switching_poses_span_tracked_and_marginal():
+    """``poses = "switching"`` with ``pose_switch`` 0 is ``tracked`` and with 1 is ``marginal``, sample by
+    sample; in between, one sample's likelihood is the mixture over the poses with the prior ``(1 - s)``
+    times the posterior so far plus ``s`` times the weights ``exp(-V)``, by hand."""
+    poses = [offset(dx=0.1, dy=-0.05), offset(dx=0.1, dy=0.05)]
+    gs = GoalSet((top_goal("cup", *poses), top_goal("bowl", offset(dx=0.1, dy=0.12))))
+    u = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.0])
+    for s, other in ((0.0, TRACKED), (1.0, MARGINAL)):
+        a = b = Belief.uniform(gs)
+        for _ in range(5):
+            a, b = a.after_input(GRIPPER, u, SWITCHING.model_copy(update={"pose_switch": s})), b.after_input(GRIPPER, u, other)
+        np.testing.assert_allclose(a.probs, b.probs, rtol=0, atol=1e-12)
+    s = 0.3
+    cfg = SWITCHING.model_copy(update={"pose_switch": s})
+    b = Belief.uniform(gs).after_input(GRIPPER, u, cfg)
+    post = np.exp(b.pose_log_w[0, :2])
+    v = [10.0 * v_trans(math.dist(offset(), p)) for p in poses]  # the tracker's V at the gripper (same orientation)
+    pi = [math.exp(-x) / sum(math.exp(-y) for y in v) for x in v]
+    prior = [(1 - s) * w + s * q for w, q in zip(post, pi)]
+    per = [10.0 * hand_q_minus_v_path(offset(), p, u[:3]) for p in poses]
+    bowl = 10.0 * hand_q_minus_v_path(offset(), offset(dx=0.1, dy=0.12), u[:3])
+    cup_nll = -math.log(sum(w * math.exp(-x) for w, x in zip(prior, per)))
+    step = b.after_input(GRIPPER, u, cfg)
+    gained = math.log(step.probs[0] / step.probs[1]) - math.log(b.probs[0] / b.probs[1])
+    assert gained == pytest.approx(bowl - cup_nll, abs=1e-9)
+
+
+def test_switching_poses_follow_a_user_who_changes_grasp():
+    """A user drives at the cup's -y grasp long enough for the tracked posterior to settle there, then at
+    its +y grasp: with the pose free to change (``pose_switch`` 0.025) the posterior is on +y within 20
+    samples (half a second at 40 a second) while the settled one has hardly moved, and the cup keeps more
+    of its probability against the bowl."""
+    gs = GoalSet((top_goal("cup", offset(dx=0.1, dy=-0.05), offset(dx=0.1, dy=0.05)),
+                  top_goal("bowl", offset(dx=0.1, dy=0.12))))
+    first, then = np.array([0.1, -0.05, 0, 0, 0, 0]), np.array([0.1, 0.05, 0, 0, 0, 0])
+    tracked = switching = Belief.uniform(gs)
+    for _ in range(60):
+        tracked, switching = tracked.after_input(GRIPPER, first, TRACKED), switching.after_input(GRIPPER, first, SWITCHING)
+    assert np.exp(tracked.pose_log_w[0, 0]) > 0.99 and np.exp(switching.pose_log_w[0, 0]) > 0.9
+    for _ in range(20):
+        tracked, switching = tracked.after_input(GRIPPER, then, TRACKED), switching.after_input(GRIPPER, then, SWITCHING)
+    assert np.exp(switching.pose_log_w[0, 1]) > 0.5
+    assert np.exp(tracked.pose_log_w[0, 1]) < 0.05
+    assert switching.probs[0] > tracked.probs[0]
+
+
 def test_tracked_pose_weights_start_again_when_the_belief_resamples():
     gs = scene_with_multi_pose_target()
     b = Belief.uniform(gs)

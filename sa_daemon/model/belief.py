@@ -60,6 +60,9 @@ INPUT_COPY_WEIGHTS = ("input", "tracked")
 """The ``intent.copy_weights`` that read the input's posterior over the grasp poses: the belief keeps that
 posterior (:attr:`Belief.pose_log_w`) and carries it through a resampling."""
 
+POSTERIOR_POSES = ("tracked", "switching")
+"""The ``intent.poses`` whose likelihood weighs a goal's poses by its posterior over them."""
+
 JOINT_COPY_REACHES = ("pooled", "ranked")
 """The ``intent.copy_reach`` that read each target's posterior over all its poses across its copies: the
 belief keeps it (:attr:`Belief.pose_joint_log_w`)."""
@@ -198,8 +201,10 @@ class Belief:
         rationality of the part the input drives (``intent.rationality``, ``intent.rotation_rationality``);
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
-        its lowest-value one alone (``intent.poses``). The pose posterior is kept whenever ``poses`` or
-        ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input`` or ``tracked``.
+        with that posterior the pose free to change before each sample (``switching``,
+        :func:`switched_pose_log_w`), or its lowest-value one alone (``intent.poses``). The pose posterior
+        is kept whenever ``poses`` is ``tracked`` or ``switching``, ``reach_pose`` is not ``closest``, or
+        ``copy_weights`` is ``input`` or ``tracked``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -209,10 +214,13 @@ class Belief:
         positions, quats = self.goals.positions, self.goals.quats_wxyz
         pose_log_w = joint = None
         anchor = pose.position if self.anchor is None or u[:3].any() else self.anchor
-        if cfg.poses == "tracked" or cfg.reach_pose != "closest" or cfg.copy_weights in INPUT_COPY_WEIGHTS:
+        if cfg.poses in POSTERIOR_POSES or cfg.reach_pose != "closest" or cfg.copy_weights in INPUT_COPY_WEIGHTS:
             # Bayes over each goal's poses, from uniform, along the whole input
             per = pose_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor=anchor)
             log_w = self.pose_weights()
+            if cfg.poses == "switching":  # the pose may have changed since the last sample (a sticky chain)
+                log_w = switched_pose_log_w(
+                    log_w, pose_log_weights(pose.position, pose.quat_wxyz, positions, quats, cfg), cfg.pose_switch)
             tracked_nll = mixture_nll(log_w, per)
             pose_log_w = log_w - per + tracked_nll[:, None]  # normalised per goal: sum_k w_k e^-per_k = e^-nll
             pose_log_w.setflags(write=False)
@@ -386,6 +394,19 @@ class Belief:
 LOG_FLOOR = 745.0
 """A kept pose log-weight is held within this of its row's largest (``exp(-745)`` is float64's smallest
 positive): below it a weight would be exactly zero, a pose the belief can no longer hold."""
+
+
+def switched_pose_log_w(log_w: FloatArray, log_prior: FloatArray, switch: float) -> FloatArray:
+    """One step of a sticky Markov chain over each goal's grasp poses (``intent.poses = "switching"``):
+    ``w'_k = (1 - s) w_k + s pi_k``, the user keeping its pose with probability ``1 - s`` and drawing it
+    afresh from ``pi`` (the weights ``exp(-V)`` at the gripper, :func:`~.huber.pose_log_weights`) with
+    probability ``s`` (``intent.pose_switch``, per input sample). Logs in and out ``(G, K)``; each row's
+    weights stay normalised, and padding (``-inf`` in both) stays ``-inf``."""
+    if switch <= 0.0:
+        return log_w
+    if switch >= 1.0:
+        return log_prior
+    return np.logaddexp(np.log1p(-switch) + log_w, np.log(switch) + log_prior)
 
 
 def _log_normalised(log_w: FloatArray) -> FloatArray:
