@@ -20,7 +20,7 @@ from ..geometry import FloatArray, Pose, quat_angle
 from ..world.goalset import GoalSet
 from .actions import HO_ACTION, NO_ASSIST, Action, ActionKind
 from .belief import Belief
-from .huber import tracked_pose_scores, tracker_pose_values
+from .huber import mixture_nll, tracked_pose_scores, tracker_pose_values
 from .methods import MethodSpec, method_spec
 from .reward import opposes
 from .twists import blend, ho_robot_twist, move_twist
@@ -262,10 +262,8 @@ class SharedAutonomyModel:
         if self.cfg.intent.copy_reach != "ranked" or belief.pose_joint_log_w is None:
             return belief.probs
         goals = belief.goals
-        score = belief.pose_joint_log_w - tracker_pose_values(pose.position, pose.quat_wxyz, goals.positions,
-                                                              goals.quats_wxyz, self.cfg.intent)
-        top = np.max(score, axis=1)
-        log_share = top + np.log(np.sum(np.exp(score - top[:, None]), axis=1))
+        log_share = -mixture_nll(belief.pose_joint_log_w, tracker_pose_values(
+            pose.position, pose.quat_wxyz, goals.positions, goals.quats_wxyz, self.cfg.intent))
         share = np.exp(log_share - np.max(log_share))
         ti = goals.target_index
         within = share / np.bincount(ti, weights=share)[ti]
