@@ -67,12 +67,13 @@ class IntentConfig(_Section):
         description="beta of the rotation part of Q_g - V_g (rotation-mode input), per input sample; rationality "
         "weighs the translation part (docs/model.md, The tracker)",
     )
-    poses: Literal["nearest", "marginal", "tracked", "switching"] = Field(
+    poses: Literal["nearest", "marginal", "tracked", "switching", "points"] = Field(
         "marginal",
         description="a goal with several grasp poses: nearest = V and Q from its lowest-value pose (Javdani's); "
         "marginal = P(u | g) sums P(u | pose) over its poses, weighted exp(-V); tracked = weighted by the "
         "goal's posterior over its poses from the input so far; switching = that posterior with the pose "
-        "free to change at every sample (pose_switch; session 46, off; docs/model.md, The tracker)",
+        "free to change at every sample (pose_switch); points = exp(-V) summed over each grasp point's "
+        "listings, shared among them by their posterior (sessions 18 and 46, off; docs/model.md, The tracker)",
     )
     pose_switch: float = Field(
         0.025, ge=0, le=1,

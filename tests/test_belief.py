@@ -836,6 +836,65 @@ def test_switching_poses_follow_a_user_who_changes_grasp():
     assert switching.probs[0] > tracked.probs[0]
 
 
+POINTS = MARGINAL.model_copy(update={"poses": "points"})
+
+
+def bowl_with_twin_listings(yaw: float = 0.5) -> GoalSet:
+    """A bowl grasp listed at yaw and yaw + pi at one point 2 cm below the gripper, another point 5 cm
+    away; a cup elsewhere with one listing at the gripper's orientation."""
+    at, other = offset(dz=-0.02), offset(dx=0.05, dz=-0.02)
+    bowl = Goal("bowl", GraspType.TOP, (Pose.from_rpy(at, (math.pi, 0.0, yaw)),
+                                        Pose.from_rpy(at, (math.pi, 0.0, yaw + math.pi)),
+                                        Pose.from_rpy(other, (math.pi, 0.0, yaw))))
+    return GoalSet((bowl, top_goal("cup", offset(dx=0.12, dz=-0.02))))
+
+
+def test_points_weigh_a_grasp_point_as_marginal_and_its_listings_by_their_posterior():
+    """``poses = "points"``: a point's weight is the sum of its listings' ``exp(-V)`` weights (as under
+    ``marginal``) and its listings share it by their posterior; rows stay normalised, padding weighs
+    nothing."""
+    from sa_daemon.model.belief import point_listing_log_w
+    from sa_daemon.model.huber import pose_log_weights
+
+    gs = bowl_with_twin_listings()
+    prior = pose_log_weights(GRIPPER.position, GRIPPER.quat_wxyz, gs.positions, gs.quats_wxyz, POINTS)
+    post = np.array([[np.log(0.1), np.log(0.6), np.log(0.3)], [0.0, -np.inf, -np.inf]])
+    w = np.exp(point_listing_log_w(prior, post, gs.same_point))
+    pi = np.exp(prior)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-12)
+    assert w[0, 0] + w[0, 1] == pytest.approx(pi[0, 0] + pi[0, 1], abs=1e-12)
+    assert w[0, 1] / w[0, 0] == pytest.approx(6.0, rel=1e-12)
+    assert w[0, 2] == pytest.approx(pi[0, 2], abs=1e-12)
+    assert w[1, 1] == 0.0 and w[1, 2] == 0.0
+    assert pi[0, 1] < 0.01 * pi[0, 0]  # marginal all but ignores the listing half a turn away
+
+
+def test_points_read_translation_exactly_as_marginal():
+    """Translation moves a point's listings alike, so while the input only translates, ``points`` is
+    ``marginal``, sample by sample."""
+    gs = bowl_with_twin_listings()
+    a = b = Belief.uniform(gs)
+    for u in ([0.05, 0.0, -0.02], [0.0, 0.05, 0.0], [0.1, -0.02, 0.01]):
+        for _ in range(5):
+            twist = np.r_[u, 0.0, 0.0, 0.0]
+            a, b = a.after_input(GRIPPER, twist, POINTS), b.after_input(GRIPPER, twist, MARGINAL)
+        np.testing.assert_allclose(a.probs, b.probs, rtol=0, atol=1e-12)
+
+
+def test_points_follow_a_turn_toward_the_listing_that_needs_more_turn():
+    """At the bowl's point, a user turning toward its listing half a turn away (the short way round, about
+    -z): ``marginal`` reads the turn against the near listing, whose weight is almost all, and the bowl
+    loses to the cup; ``points`` lets the turn's posterior pick the far listing and the bowl keeps more."""
+    gs = bowl_with_twin_listings()
+    turn = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -0.2])
+    pts = mar = Belief.uniform(gs)
+    for _ in range(40):
+        pts, mar = pts.after_input(GRIPPER, turn, POINTS), mar.after_input(GRIPPER, turn, MARGINAL)
+    post = np.exp(pts.pose_log_w[0])
+    assert post[1] > 0.9 * (post[0] + post[1])
+    assert pts.probs[0] > mar.probs[0]
+
+
 def test_tracked_pose_weights_start_again_when_the_belief_resamples():
     gs = scene_with_multi_pose_target()
     b = Belief.uniform(gs)

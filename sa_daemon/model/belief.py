@@ -60,7 +60,7 @@ INPUT_COPY_WEIGHTS = ("input", "tracked")
 """The ``intent.copy_weights`` that read the input's posterior over the grasp poses: the belief keeps that
 posterior (:attr:`Belief.pose_log_w`) and carries it through a resampling."""
 
-POSTERIOR_POSES = ("tracked", "switching")
+POSTERIOR_POSES = ("tracked", "switching", "points")
 """The ``intent.poses`` whose likelihood weighs a goal's poses by its posterior over them."""
 
 JOINT_COPY_REACHES = ("pooled", "ranked")
@@ -231,6 +231,10 @@ class Belief:
                                               cfg.rotation_scale, anchor)
         elif cfg.poses == "marginal":
             nll = marginal_nll(pose.position, pose.quat_wxyz, u, positions, quats, cfg, anchor)
+        elif cfg.poses == "points":
+            nll = mixture_nll(point_listing_log_w(
+                pose_log_weights(pose.position, pose.quat_wxyz, positions, quats, cfg), log_w, self.goals.same_point),
+                per)
         else:
             nll = tracked_nll
         free = self._competing()
@@ -394,6 +398,28 @@ class Belief:
 LOG_FLOOR = 745.0
 """A kept pose log-weight is held within this of its row's largest (``exp(-745)`` is float64's smallest
 positive): below it a weight would be exactly zero, a pose the belief can no longer hold."""
+
+
+def point_log_sum_exp(log_x: FloatArray, same_point: np.ndarray) -> FloatArray:
+    """``log sum_{j at k's grasp point} x_j`` for every pose ``k`` ``(G, K)``; ``-inf`` on padding."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(same_point, log_x[:, None, :], -np.inf)
+        top = np.max(a, axis=-1)
+        safe = np.where(np.isfinite(top), top, 0.0)
+        return safe + np.log(np.sum(np.exp(a - safe[..., None]), axis=-1))
+
+
+def point_listing_log_w(log_prior: FloatArray, log_post: FloatArray, same_point: np.ndarray) -> FloatArray:
+    """Pose log-weights ``(G, K)`` of ``intent.poses = "points"``: a grasp point weighs the sum of its
+    listings' ``exp(-V)`` weights (``log_prior``, :func:`~.huber.pose_log_weights`), as under ``marginal``,
+    and shares it among its listings by their posterior from the input so far (``log_post``,
+    :attr:`Belief.pose_log_w`): ``w_k = (sum_{j at k's point} pi_j) P(k | g, input) / sum_{j at k's point}
+    P(j | g, input)``. Translation input moves the listings of one point alike, so their posterior ratio is
+    what the turning has said; a listing the turn points at is not charged for needing more turn from
+    where the gripper is. Each row stays normalised; padding stays ``-inf``."""
+    with np.errstate(invalid="ignore"):
+        out = point_log_sum_exp(log_prior, same_point) + log_post - point_log_sum_exp(log_post, same_point)
+    return np.where(np.isnan(out), -np.inf, out)
 
 
 def switched_pose_log_w(log_w: FloatArray, log_prior: FloatArray, switch: float) -> FloatArray:

@@ -17,6 +17,9 @@ from .goals import Goal
 
 PAD_DISTANCE_M = 1000.0
 
+SAME_POINT_M = 1e-6
+"""Grasp poses of one goal closer than this (m) are listings of one grasp point (:attr:`GoalSet.same_point`)."""
+
 
 @dataclass(frozen=True, eq=False)
 class GoalSet:
@@ -58,6 +61,16 @@ class GoalSet:
         """``(G, K)``: which entries of the padded pose arrays are grasp poses (``False``: padding)."""
         k = max(len(g.poses) for g in self.goals)
         out = np.arange(k)[None, :] < np.array([len(g.poses) for g in self.goals])[:, None]
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def same_point(self) -> np.ndarray:
+        """``(G, K, K)``: which of a goal's grasp poses share a grasp point (position within ``SAME_POINT_M``)
+        with which, padding with none: the scenes list each grasp at two yaws half a turn apart
+        (``docs/scenes.md``), and a sphere's at several."""
+        d = np.linalg.norm(self.positions[:, :, None, :] - self.positions[:, None, :, :], axis=-1)
+        out = (d <= SAME_POINT_M) & self.pose_mask[:, :, None] & self.pose_mask[:, None, :]
         out.setflags(write=False)
         return out
 
