@@ -29,10 +29,8 @@ from sa_daemon.geometry import quat_angle
 from sa_daemon.sim.episode import desired_pose, kinematic_arm
 from sa_daemon.sim.success import scene_object
 from sa_daemon.sim.users import load_user
+from sa_daemon.world.goalset import SAME_POINT_M
 from sa_daemon.world.scene import Scene, load_scene
-
-SAME_M = 1e-6
-"""Listed poses closer than this (m) are one grasp point."""
 
 
 @cache
@@ -57,7 +55,7 @@ def extra_turn_deg(scene_name: str, task: str, seed: int, user: str) -> float:
     def turn(quat_wxyz: np.ndarray) -> float:
         return float(np.degrees(quat_angle(quat_wxyz, scene.start.quat_wxyz)))
 
-    same = [p for p in goal.poses if np.linalg.norm(p.position - want.position) < SAME_M]
+    same = [p for p in goal.poses if np.linalg.norm(p.position - want.position) <= SAME_POINT_M]
     return turn(want.quat_wxyz) - min(turn(p.quat_wxyz) for p in same)
 
 

@@ -202,9 +202,11 @@ class Belief:
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
         with that posterior the pose free to change before each sample (``switching``,
-        :func:`switched_pose_log_w`), or its lowest-value one alone (``intent.poses``). The pose posterior
-        is kept whenever ``poses`` is ``tracked`` or ``switching``, ``reach_pose`` is not ``closest``, or
-        ``copy_weights`` is ``input`` or ``tracked``.
+        :func:`switched_pose_log_w`), or with each grasp point's ``exp(-V)`` weight shared among its
+        listings by that posterior (``points``, :func:`point_listing_log_w`), or its lowest-value one
+        alone (``intent.poses``). The pose posterior is kept whenever ``poses`` is one of
+        :data:`POSTERIOR_POSES`, ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input`` or
+        ``tracked``.
 
         ``user_twist`` is the user's commanded twist (m/s, rad/s, base frame, current mode only). Called at
         every input sample, also when the input is zero. NaN/inf input raises ``ValueError``. A sample that
@@ -400,15 +402,6 @@ LOG_FLOOR = 745.0
 positive): below it a weight would be exactly zero, a pose the belief can no longer hold."""
 
 
-def point_log_sum_exp(log_x: FloatArray, same_point: np.ndarray) -> FloatArray:
-    """``log sum_{j at k's grasp point} x_j`` for every pose ``k`` ``(G, K)``; ``-inf`` on padding."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(same_point, log_x[:, None, :], -np.inf)
-        top = np.max(a, axis=-1)
-        safe = np.where(np.isfinite(top), top, 0.0)
-        return safe + np.log(np.sum(np.exp(a - safe[..., None]), axis=-1))
-
-
 def point_listing_log_w(log_prior: FloatArray, log_post: FloatArray, same_point: np.ndarray) -> FloatArray:
     """Pose log-weights ``(G, K)`` of ``intent.poses = "points"``: a grasp point weighs the sum of its
     listings' ``exp(-V)`` weights (``log_prior``, :func:`~.huber.pose_log_weights`), as under ``marginal``,
@@ -417,8 +410,11 @@ def point_listing_log_w(log_prior: FloatArray, log_post: FloatArray, same_point:
     P(j | g, input)``. Translation input moves the listings of one point alike, so their posterior ratio is
     what the turning has said; a listing the turn points at is not charged for needing more turn from
     where the gripper is. Each row stays normalised; padding stays ``-inf``."""
+    def at_point(log_x: FloatArray) -> FloatArray:  # log sum_{j at k's point} x_j; NaN on padding
+        return -mixture_nll(np.where(same_point, log_x[:, None, :], -np.inf), 0.0)
+
     with np.errstate(invalid="ignore"):
-        out = point_log_sum_exp(log_prior, same_point) + log_post - point_log_sum_exp(log_post, same_point)
+        out = at_point(log_prior) + log_post - at_point(log_post)
     return np.where(np.isnan(out), -np.inf, out)
 
 
