@@ -853,8 +853,7 @@ def test_points_weigh_a_grasp_point_as_marginal_and_its_listings_by_their_poster
     """``poses = "points"``: a point's weight is the sum of its listings' ``exp(-V)`` weights (as under
     ``marginal``) and its listings share it by their posterior; rows stay normalised, padding weighs
     nothing."""
-    from sa_daemon.model.belief import point_listing_log_w
-    from sa_daemon.model.huber import pose_log_weights
+    from sa_daemon.model.huber import point_listing_log_w, pose_log_weights
 
     gs = bowl_with_twin_listings()
     prior = pose_log_weights(GRIPPER.position, GRIPPER.quat_wxyz, gs.positions, gs.quats_wxyz, POINTS)

@@ -22,7 +22,15 @@ from ..config import IntentConfig
 from ..geometry import FloatArray, Pose
 from ..world.goals import Goal, target_object
 from ..world.goalset import GoalSet
-from .huber import marginal_nll, mixture_nll, pose_log_weights, pose_nll, q_minus_v
+from .huber import (
+    marginal_nll,
+    mixture_nll,
+    point_listing_log_w,
+    pose_log_weights,
+    pose_nll,
+    q_minus_v,
+    switched_pose_log_w,
+)
 
 
 def _check_finite(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -202,8 +210,8 @@ class Belief:
         a goal's grasp poses summed with weights ``exp(-V)`` (:func:`~.huber.marginal_nll`), or with each
         goal's posterior over its poses from all the input so far (``tracked``, :attr:`pose_log_w`), or
         with that posterior the pose free to change before each sample (``switching``,
-        :func:`switched_pose_log_w`), or with each grasp point's ``exp(-V)`` weight shared among its
-        listings by that posterior (``points``, :func:`point_listing_log_w`), or its lowest-value one
+        :func:`~.huber.switched_pose_log_w`), or with each grasp point's ``exp(-V)`` weight shared among its
+        listings by that posterior (``points``, :func:`~.huber.point_listing_log_w`), or its lowest-value one
         alone (``intent.poses``). The pose posterior is kept whenever ``poses`` is one of
         :data:`POSTERIOR_POSES`, ``reach_pose`` is not ``closest``, or ``copy_weights`` is ``input`` or
         ``tracked``.
@@ -400,35 +408,6 @@ class Belief:
 LOG_FLOOR = 745.0
 """A kept pose log-weight is held within this of its row's largest (``exp(-745)`` is float64's smallest
 positive): below it a weight would be exactly zero, a pose the belief can no longer hold."""
-
-
-def point_listing_log_w(log_prior: FloatArray, log_post: FloatArray, same_point: np.ndarray) -> FloatArray:
-    """Pose log-weights ``(G, K)`` of ``intent.poses = "points"``: a grasp point weighs the sum of its
-    listings' ``exp(-V)`` weights (``log_prior``, :func:`~.huber.pose_log_weights`), as under ``marginal``,
-    and shares it among its listings by their posterior from the input so far (``log_post``,
-    :attr:`Belief.pose_log_w`): ``w_k = (sum_{j at k's point} pi_j) P(k | g, input) / sum_{j at k's point}
-    P(j | g, input)``. Translation input moves the listings of one point alike, so their posterior ratio is
-    what the turning has said; a listing the turn points at is not charged for needing more turn from
-    where the gripper is. Each row stays normalised; padding stays ``-inf``."""
-    def at_point(log_x: FloatArray) -> FloatArray:  # log sum_{j at k's point} x_j; NaN on padding
-        return -mixture_nll(np.where(same_point, log_x[:, None, :], -np.inf), 0.0)
-
-    with np.errstate(invalid="ignore"):
-        out = at_point(log_prior) + log_post - at_point(log_post)
-    return np.where(np.isnan(out), -np.inf, out)
-
-
-def switched_pose_log_w(log_w: FloatArray, log_prior: FloatArray, switch: float) -> FloatArray:
-    """One step of a sticky Markov chain over each goal's grasp poses (``intent.poses = "switching"``):
-    ``w'_k = (1 - s) w_k + s pi_k``, the user keeping its pose with probability ``1 - s`` and drawing it
-    afresh from ``pi`` (the weights ``exp(-V)`` at the gripper, :func:`~.huber.pose_log_weights`) with
-    probability ``s`` (``intent.pose_switch``, per input sample). Logs in and out ``(G, K)``; each row's
-    weights stay normalised, and padding (``-inf`` in both) stays ``-inf``."""
-    if switch <= 0.0:
-        return log_w
-    if switch >= 1.0:
-        return log_prior
-    return np.logaddexp(np.log1p(-switch) + log_w, np.log(switch) + log_prior)
 
 
 def _log_normalised(log_w: FloatArray) -> FloatArray:

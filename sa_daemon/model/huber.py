@@ -197,6 +197,35 @@ def mixture_nll(log_w: FloatArray, nll: FloatArray) -> FloatArray:
     return -(top + np.log(np.sum(np.exp(m - top[..., None]), axis=-1)))
 
 
+def point_listing_log_w(log_prior: FloatArray, log_post: FloatArray, same_point: np.ndarray) -> FloatArray:
+    """Pose log-weights ``(G, K)`` of ``intent.poses = "points"``: a grasp point weighs the sum of its
+    listings' ``exp(-V)`` weights (``log_prior``, :func:`pose_log_weights`), as under ``marginal``,
+    and shares it among its listings by their posterior from the input so far (``log_post``,
+    :attr:`~.belief.Belief.pose_log_w`): ``w_k = (sum_{j at k's point} pi_j) P(k | g, input) / sum_{j at k's point}
+    P(j | g, input)``. Translation input moves the listings of one point alike, so their posterior ratio is
+    what the turning has said; a listing the turn points at is not charged for needing more turn from
+    where the gripper is. Each row stays normalised; padding stays ``-inf``."""
+    def at_point(log_x: FloatArray) -> FloatArray:  # log sum_{j at k's point} x_j; NaN on padding
+        return -mixture_nll(np.where(same_point, log_x[:, None, :], -np.inf), 0.0)
+
+    with np.errstate(invalid="ignore"):
+        out = at_point(log_prior) + log_post - at_point(log_post)
+    return np.where(np.isnan(out), -np.inf, out)
+
+
+def switched_pose_log_w(log_w: FloatArray, log_prior: FloatArray, switch: float) -> FloatArray:
+    """One step of a sticky Markov chain over each goal's grasp poses (``intent.poses = "switching"``):
+    ``w'_k = (1 - s) w_k + s pi_k``, the user keeping its pose with probability ``1 - s`` and drawing it
+    afresh from ``pi`` (the weights ``exp(-V)`` at the gripper, :func:`pose_log_weights`) with
+    probability ``s`` (``intent.pose_switch``, per input sample). Logs in and out ``(G, K)``; each row's
+    weights stay normalised, and padding (``-inf`` in both) stays ``-inf``."""
+    if switch <= 0.0:
+        return log_w
+    if switch >= 1.0:
+        return log_prior
+    return np.logaddexp(np.log1p(-switch) + log_w, np.log(switch) + log_prior)
+
+
 def marginal_nll(position: FloatArray, quat: FloatArray, user_twist: FloatArray, goal_positions: FloatArray,
                  goal_quats: FloatArray, cfg: IntentConfig, anchor: FloatArray | None = None) -> FloatArray:
     """``-log P(u | g)`` (nats) of one input sample for goals with several grasp poses ``(G, K, ...)``, the
