@@ -20,6 +20,7 @@ from sa_daemon.arm.kinematics import ArmKinematics
 from sa_daemon.arm.mujoco_arm import MujocoArm
 from sa_daemon.config import Config
 from sa_daemon.control.safety import SafetyCode, SafetyPipeline
+from sa_daemon.geometry import Pose
 from sa_daemon.sim.episode import arm_factory, run_trial
 from sa_daemon.sim.success import NOT_LIFTED, grasp_outcome
 from sa_daemon.world.scene import load_scene
@@ -201,6 +202,22 @@ def test_closing_on_nothing_lifts_nothing(arm):
     arm.command_gripper(False)
     arm.step(0.6)
     assert np.all(arm.fingers > 0.04)
+
+
+def test_the_lift_test_closes_where_the_arm_was_not_where_its_last_twist_would_carry_it(scene1, arm):
+    """A trial ends at the close with the arm's last twist still held (a user closing on the move). The
+    lift test stands the arm still first: the fingers close where the gripper was, 3 cm above the grasp
+    (the rim 1.5 cm below the pads' tips), and nothing rises; carried on down by the held 4 cm/s over
+    the settle they would close round the rim and lift the cup."""
+    grasp = scene1.goal("cup:top").poses[0]
+    arm.place(Pose(grasp.position + np.array([0.0, 0.0, 0.05]), grasp.quat_wxyz))
+    arm.step(0.1)
+    _hold(arm, [0.0, 0.0, -0.04, 0.0, 0.0, 0.0], 0.5)  # still descending, 3 cm above the grasp
+    z_close = arm.read().pose.position[2]
+    assert z_close - grasp.position[2] == pytest.approx(0.03, abs=3e-3)
+    arm.command_gripper(True)
+    assert arm.lift_test() is None
+    assert arm.read().pose.position[2] - z_close == pytest.approx(0.05, abs=3e-3)  # the lift, from the close
 
 
 def test_a_pose_that_holds_on_paper_fails_when_the_physical_gripper_lifts_nothing(scene1, arm):

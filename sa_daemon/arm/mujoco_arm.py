@@ -137,7 +137,8 @@ class MujocoArm(Arm):
     # -- commands ------------------------------------------------------------------------------------
 
     def command_twist(self, twist: FloatArray) -> None:
-        """Hold ``twist`` (m/s, rad/s, base frame) until the next command; ignored while closed."""
+        """Hold ``twist`` (m/s, rad/s, base frame) until the next command (a closed gripper does not gate
+        it: see :meth:`command_gripper`)."""
         self._twist = commanded_twist(twist, self._limits)
 
     def command_gripper(self, closed: bool) -> None:
@@ -213,10 +214,15 @@ class MujocoArm(Arm):
     # -- physical success check ----------------------------------------------------------------------
 
     def lift_test(self, height: float = 0.05, speed: float = 0.05, settle_s: float = 1.0) -> str | None:
-        """Close the gripper (if open), let the fingers settle, lift the TCP by ``height`` m at ``speed``
-        m/s, hold 0.3 s, and return the name of the object that rose by at least half of ``height``
-        (the one that rose most), or ``None``. Moves the arm: call it when the trial is over.
+        """Stop the arm, close the gripper (if open), let the fingers settle, lift the TCP by ``height`` m
+        at ``speed`` m/s, hold 0.3 s, and return the name of the object that rose by at least half of
+        ``height`` (the one that rose most), or ``None``. Moves the arm: call it when the trial is over.
+
+        The arm stands still from the call until the lift, whatever twist it last held: the fingers close
+        where the trial closed them, as the safety pipeline's ``gripper_closed`` stage holds the arm in the
+        daemon (a trial ends at the close without a further command).
         """
+        self._twist = np.zeros(6)
         if not self._closed:
             self.command_gripper(True)
         waited = 0.0
