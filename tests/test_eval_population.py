@@ -20,6 +20,7 @@ from sa_daemon.sim.evaluate import (
     compare,
     format_summary,
     question_measures,
+    rule_line,
     run_trials,
     summarise,
 )
@@ -58,6 +59,21 @@ def test_rows_are_per_user_with_intervals_and_failure_counts():
     assert hasty["failures"] == {"closed outside the object": 3}
     assert hasty["ci95"]["completion_time_s"] == [12.0, 12.0]  # over the successes only
     json.dumps(rows)  # JSON-ready
+    assert "rule_judged" not in cal and "rule_judged" not in hasty  # no lift decided: rows as before
+
+
+def test_a_physics_run_counts_where_the_holding_rule_and_the_lift_disagree():
+    """Records from a physics arm carry the rule's verdict on each close (``rule_held``); the row counts
+    the closes the rule holds that did not lift and the lifted ones it fails, and the run prints it."""
+    cases = [(True, True), (True, True), (True, False), (False, True), (False, True), (False, False)]
+    trials = [_trial("ho", s, 10.0, success=ok, kind="not lifted") | {"rule_held": rule}
+              for s, (ok, rule) in enumerate(cases)]
+    trials.append(_trial("ho", 6, None, success=False))  # a time-out: nothing closed, no verdict
+    (row,) = summarise(trials)
+    assert (row["rule_judged"], row["rule_held_not_lifted"], row["rule_failed_lifted"]) == (6, 2, 1)
+    assert rule_line([row]) == ("holding rule against the lift, on the 6 closes a lift decided: the rule holds 2 "
+                                "that did not lift and fails 1 that did (the kinematic arm's success is the rule)")
+    assert rule_line(summarise(trials[-1:])) is None
 
 
 def test_a_user_column_appears_only_for_a_population():

@@ -235,9 +235,10 @@ def test_grasp_outcome_of_a_held_pose_succeeds_on_a_kinematic_arm(task):
     assert not callable(getattr(arm, "lift_test", None))
     for a in (arm, None):
         outcome = grasp_outcome(scene, task, pose, a)
-        assert outcome.success is True and outcome.reason == ""
+        assert outcome.success is True and outcome.reason == "" and outcome.rule_held is None  # the rule decided
     missed = grasp_outcome(scene, task, _back(pose, 0.03), arm)
     assert missed.success is False and missed.reason not in ("", "timeout") and missed.kind in HOLD_FAILURES
+    assert missed.rule_held is None
 
 
 def test_grasp_outcome_refuses_a_held_pose_of_another_grasp_type():

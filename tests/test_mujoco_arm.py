@@ -228,6 +228,17 @@ def test_a_pose_that_holds_on_paper_fails_when_the_physical_gripper_lifts_nothin
     outcome = grasp_outcome(scene1, "cup:top", pose, arm)
     assert outcome.success is False and outcome.kind == NOT_LIFTED
     assert "raised nothing" in outcome.reason
+    assert outcome.rule_held is True  # the kinematic arm would have counted it: the run says so
+
+
+def test_a_lift_records_the_rule_s_verdict_on_the_same_close(scene1, arm):
+    """Where the lift decides, the outcome carries what the rule says of the same close: the cup lifted
+    from its rim grasp, which the rule holds too (the other way round, see the test above)."""
+    grasp = scene1.goal("cup:top").poses[0]
+    arm.place(grasp)
+    arm.step(0.1)
+    held = grasp_outcome(scene1, "cup:top", arm.read().pose, arm)
+    assert held.success is True and held.rule_held is True
 
 
 # -- evaluation ----------------------------------------------------------------------------------------
@@ -250,6 +261,12 @@ def test_cli_eval_accepts_the_mujoco_arm_in_a_spawn_pool(tmp_path):
     data = json.loads(out.read_text())
     assert data["meta"]["arm"] == "mujoco"
     assert [t["success"] for t in data["trials"]] == [True, True]
+    # Each close is judged by the holding rule too; the run counts where the two disagree.
+    assert all(isinstance(t["rule_held"], bool) for t in data["trials"])
+    (row,) = data["summary"]
+    assert row["rule_judged"] == 2 and row["rule_failed_lifted"] == sum(not t["rule_held"] for t in data["trials"])
+    assert row["rule_held_not_lifted"] == 0
+    assert f"on the 2 closes a lift decided: the rule holds 0 that did not lift and fails {row['rule_failed_lifted']}" in r.stdout
 
 
 # -- viewing -------------------------------------------------------------------------------------------

@@ -35,6 +35,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         earlier_trials,
         format_summary,
         run_trials,
+        rule_line,
         summarise,
         write_results,
     )
@@ -74,6 +75,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     print(format_summary(summary, comparisons=comparisons))
     print("stars: policy differs from that method on that metric (paired Wilcoxon over seeds, Holm per task"
           " and user: * p<0.05 ** p<0.01 *** p<0.001 **** p<0.0001)")
+    if (line := rule_line(summary)) is not None:
+        print(line)
     if speed is not None:
         print(speed.line())
     if plots is not None:

@@ -90,6 +90,7 @@ class TrialResult:
     user: str = "calibrated"  # the simulated user's profile (sim/users.py)
     yes_withdrawn: int = 0  # "yes" answers withdrawn against the user's opposition (asking.withdraw_yes_s)
     no_withdrawn: int = 0  # times the "no" answers were withdrawn so (asking.withdraw_no_s)
+    rule_held: bool | None = None  # on a physics arm: the holding rule's verdict on the close (sim/success.py)
     user_pose: Pose | None = None  # the grasp pose the simulated user drove to (not in the JSON record)
 
     def metrics(self) -> dict:
@@ -102,7 +103,7 @@ class TrialResult:
                 "joystick_input", "opposing_pct", "correct_prediction", "questions", "final_target_p", "plans",
                 "yes_withdrawn", "no_withdrawn",
             )
-        }
+        } | ({} if self.rule_held is None else {"rule_held": self.rule_held})
 
 
 EARLY_S = 2.0
@@ -273,6 +274,7 @@ def run_trial(
         success=outcome.success,
         failure=outcome.reason,
         failure_kind=outcome.kind,
+        rule_held=outcome.rule_held,
         asked=asked,
         early_plans=early,
         user=user_name,

@@ -177,10 +177,34 @@ def summarise(trials: list[dict]) -> list[dict]:
                 kind = t.get("failure_kind") or "unknown"  # (records from before issue 15 have none)
                 failures[kind] = failures.get(kind, 0) + 1
         row["failures"] = failures
+        row.update(rule_against_lift(ts))
         row.update(question_measures(ts))
         row["ci95"] = ci
         out.append(row)
     return out
+
+
+def rule_against_lift(ts: list[dict]) -> dict:
+    """On a physics arm (records with ``rule_held``), how the geometric holding rule that decides success
+    on the kinematic arm fares against the lift on the same closes: ``rule_held_not_lifted`` (the rule
+    would have counted a success the lift did not give) and ``rule_failed_lifted``. ``{}`` for records
+    without it (the kinematic arm, files from before session 47), so their summaries are unchanged."""
+    judged = [t for t in ts if t.get("rule_held") is not None]
+    if not judged:
+        return {}
+    return {"rule_judged": len(judged),
+            "rule_held_not_lifted": sum(t["rule_held"] and not t["success"] for t in judged),
+            "rule_failed_lifted": sum(t["success"] and not t["rule_held"] for t in judged)}
+
+
+def rule_line(summary: list[dict]) -> str | None:
+    """One line on :func:`rule_against_lift` over a whole run, or ``None`` if no lift decided a trial."""
+    rows = [r for r in summary if "rule_judged" in r]
+    if not rows:
+        return None
+    n, held, failed = (sum(r[k] for r in rows) for k in ("rule_judged", "rule_held_not_lifted", "rule_failed_lifted"))
+    return (f"holding rule against the lift, on the {n} closes a lift decided: the rule holds {held} that did not "
+            f"lift and fails {failed} that did (the kinematic arm's success is the rule)")
 
 
 def question_measures(ts: list[dict]) -> dict:

@@ -20,11 +20,15 @@ from ..world.scene import Scene, SceneObject
 @dataclass(frozen=True)
 class Outcome:
     """``success`` and, for a failure, why: ``kind`` (one of :data:`FAILURES`, for counting) and ``reason``
-    (with its numbers, for reading: ``the TCP is 0.012 m outside the object``)."""
+    (with its numbers, for reading: ``the TCP is 0.012 m outside the object``). ``rule_held``: where a
+    lift decided, whether the geometric rule (the kinematic arm's stand-in for the lift) holds the same
+    close, so every physics run measures the rule; ``None`` where the rule itself decided or nothing
+    closed."""
 
     success: bool
     reason: str = ""
     kind: str = ""
+    rule_held: bool | None = None
 
 
 TIMEOUT = "timeout"
@@ -55,5 +59,6 @@ def grasp_outcome(scene: Scene, task: str, closed_at: Pose | None, arm: Arm | No
         return Outcome(False, verdict.reason, verdict.kind)
     lifted = lift_test()
     if lifted != goal.object:
-        return Outcome(False, f"the lift test raised {lifted or 'nothing'}, not the {goal.object}", NOT_LIFTED)
-    return Outcome(True)
+        return Outcome(False, f"the lift test raised {lifted or 'nothing'}, not the {goal.object}", NOT_LIFTED,
+                       rule_held=verdict.held)
+    return Outcome(True, rule_held=verdict.held)
