@@ -34,8 +34,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         compare,
         earlier_trials,
         format_summary,
-        run_trials,
         rule_line,
+        run_trials,
         summarise,
         write_results,
     )
