@@ -168,6 +168,18 @@ class MoveConfig(_Section):
     linear_max_mps: float = Field(0.15, gt=0)
     angular_gain: float = Field(1.0, gt=0, description="1/s")
     angular_max_radps: float = Field(0.3, gt=0)
+    approach_standoff_m: float = Field(
+        0.0, ge=0, le=0.3,
+        description="m; > 0: moves and HO head for a point this far behind the grasp along its approach axis "
+        "until the gripper is on that axis (twists.approach_points); 0 = straight to the grasp (the paper)",
+    )
+    approach_funnel: float = Field(
+        2.0, gt=0, description="the point behind the grasp is this many times the gripper's distance from the axis",
+    )
+    approach_turn_m: float = Field(
+        0.08, ge=0, le=0.5,
+        description="m; the point stays at least this times sin(orientation error, at most 90 deg) behind the grasp",
+    )
 
 
 class BlendConfig(_Section):

@@ -351,3 +351,20 @@ class DaemonProc:
             self._reader.join(5)
         self.stdout.close()
         self.stderr.close()
+
+
+def predicted_input(cfg, p, q, kp, kq, g: int, mode, speed: tuple[float, float]) -> np.ndarray:
+    """The watch model's predicted joystick twist (m/s, rad/s) at pose ``(p, q)`` for a user heading to
+    goal ``g`` (``kp``, ``kq``: the goals' poses) in joystick ``mode`` at ``speed``: toward the pre-grasp
+    point first in translation, toward the goal's orientation in rotation."""
+    from sa_daemon.model.actions import Mode
+    from sa_daemon.model.huber import pregrasp_points
+    from sa_daemon.model.twists import user_angular, user_linear
+
+    u = np.zeros(6)
+    standoff = cfg.intent.user_standoff_m
+    if mode is Mode.TRANSLATION:
+        u[:3] = user_linear(p, kp[g], pregrasp_points(kp[g], kq[g], standoff), speed[0], standoff)
+    else:
+        u[3:] = user_angular(q, kq[g], speed[1])
+    return u

@@ -18,11 +18,16 @@ from sa_daemon.arm.base import Arm, ArmState
 from sa_daemon.arm.factory import make_arm
 from sa_daemon.arm.kinematics import ArmKinematics
 from sa_daemon.arm.mujoco_arm import MujocoArm
-from sa_daemon.config import Config
+from sa_daemon.arm.reach import reachable_scene
+from sa_daemon.config import Config, config_from_dict
 from sa_daemon.control.safety import SafetyCode, SafetyPipeline
 from sa_daemon.geometry import Pose
+from sa_daemon.model.actions import Action, ActionKind
+from sa_daemon.model.model import SharedAutonomyModel
 from sa_daemon.sim.episode import arm_factory, run_trial
 from sa_daemon.sim.success import NOT_LIFTED, grasp_outcome
+from sa_daemon.world.goals import Goal
+from sa_daemon.world.goalset import GoalSet
 from sa_daemon.world.scene import load_scene
 
 
@@ -239,6 +244,41 @@ def test_a_lift_records_the_rule_s_verdict_on_the_same_close(scene1, arm):
     arm.step(0.1)
     held = grasp_outcome(scene1, "cup:top", arm.read().pose, arm)
     assert held.success is True and held.rule_held is True
+
+
+def _drive_move(arm: MujocoArm, cfg: Config, goal: Goal, grasp: Pose, limit_s: float) -> float:
+    """The robot's own move-to-goal twist (no user, no blend) toward ``grasp`` until within 3 mm and 0.02 rad
+    or ``limit_s``; returns how far (m, in the table's plane) the goal's object was pushed meanwhile."""
+    body = arm.world.object_bodies[arm.world.object_names.index(goal.object)]
+    start = np.array(arm.data.xpos[body][:2])
+    goals = GoalSet((Goal(goal.object, goal.grasp_type, (grasp,)),))
+    model, move = SharedAutonomyModel(cfg), Action(ActionKind.MOVE, 0, goal.target)
+    for _ in range(round(limit_s / 0.025)):
+        pose = arm.read().pose
+        d_t, d_r = pose.distance(grasp)
+        if d_t < 3e-3 and d_r < 0.02:
+            break
+        arm.command_twist(model.robot_twist(move, goals, np.ones(1), pose, np.zeros(6)))
+        arm.step(0.025)
+    return float(np.linalg.norm(np.array(arm.data.xpos[body][:2]) - start))
+
+
+def test_a_straight_move_pushes_the_cup_off_its_side_grasp_and_the_approach_corridor_lifts_it(scene1):
+    """From the start pose to one of the cup's side grasps (the gripper turns 90 deg on the way), the
+    straight move (the paper's generator) sweeps a finger into the cup and pushes it 2 cm or more: the
+    lift raises nothing. With the approach corridor (``move.approach_standoff_m = 0.06``: turn while
+    behind the grasp, come in along the gripper's approach) the cup stays put and lifts."""
+    for standoff, pushed, lifted in ((0.0, True, None), (0.06, False, "cup")):
+        cfg = config_from_dict({"move": {"approach_standoff_m": standoff}})
+        arm = MujocoArm(scene1, cfg)
+        goal = reachable_scene(scene1, arm.kinematics, cfg.safety.joint_margin_rad).goal("cup:side")
+        grasp = goal.poses[3]
+        push = _drive_move(arm, cfg, goal, grasp, 12.0)
+        d_t, _ = arm.read().pose.distance(grasp)
+        assert d_t < 4e-3, standoff  # both arrive
+        assert push > 0.02 if pushed else push < 2e-3, (standoff, push)
+        assert arm.lift_test() == lifted
+        arm.close()
 
 
 # -- evaluation ----------------------------------------------------------------------------------------

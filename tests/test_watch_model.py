@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from helpers import predicted_input
 
 from sa_daemon.config import config_from_dict
 from sa_daemon.geometry import Pose, quat_angle, turn
@@ -447,13 +448,9 @@ def _ho_rollout_by_hand(cfg, kp, kq, b0, position, quat, g, mode, speed, steps, 
     Returns the pose after ``steps`` and the belief."""
     log_b = np.log(b0)
     p, q = np.array(position, dtype=float), np.array(quat, dtype=float)
-    standoff, alpha, T = cfg.intent.user_standoff_m, cfg.blend.alpha, cfg.intent.action_apply_time_s
+    alpha, T = cfg.blend.alpha, cfg.intent.action_apply_time_s
     for _ in range(steps):
-        u = np.zeros(6)
-        if mode is Mode.TRANSLATION:
-            u[:3] = user_linear(p, kp[g], pregrasp_points(kp[g], kq[g], standoff), speed[0], standoff)
-        else:
-            u[3:] = user_angular(q, kq[g], speed[1])
+        u = predicted_input(cfg, p, q, kp, kq, g, mode, speed)
         b = np.exp(log_b - log_b.max())
         robot = np.concatenate((ho_linear(p + u[:3] * T, kp, b, cfg), ho_angular(turn(q, u[3:], T), kq, b, cfg)))
         log_b = log_b - cfg.runtime.belief_hz * dt * cfg.intent.rationality * q_minus_v_at(

@@ -17,7 +17,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import BlendConfig, Config, InputConfig, MoveConfig
-from ..geometry import FloatArray, integrate_pose, norms, rotation_error
+from ..geometry import (
+    FloatArray,
+    integrate_pose,
+    norms,
+    quat_angle,
+    quat_z_axis,
+    rotation_error,
+)
 from .actions import Mode
 from .huber import (
     assistance_angular,
@@ -58,9 +65,37 @@ def move_twist(
 ) -> FloatArray:
     """Twist (m/s, rad/s) toward a desired pose: gain times the error, each part norm-saturated.
 
-    Broadcasts, so many (pose, goal) pairs are computed in one call.
+    Broadcasts, so many (pose, goal) pairs are computed in one call. With ``cfg.approach_standoff_m > 0``
+    the translation heads for :func:`approach_points` rather than the grasp itself.
     """
-    return np.concatenate((move_linear(position, goal_position, cfg), move_angular(quat, goal_quat, cfg)), axis=-1)
+    aim = approach_points(position, quat, goal_position, goal_quat, cfg)
+    return np.concatenate((move_linear(position, aim, cfg), move_angular(quat, goal_quat, cfg)), axis=-1)
+
+
+def approach_points(position: FloatArray, quat: FloatArray, goal_position: FloatArray, goal_quat: FloatArray,
+                    cfg: MoveConfig) -> FloatArray:
+    """The point (m) a robot twist toward a grasp heads for: a point on the grasp's approach axis (the
+    gripper's z at the grasp) a distance ``s`` behind the grasp,
+
+        s = max(min(approach_standoff_m, approach_funnel * l), approach_turn_m * sin(min(theta, pi/2))),
+
+    with ``l`` the gripper's distance (m) from that axis and ``theta`` (rad) its orientation's angle from
+    the grasp's. Off the axis it heads for a pre-grasp point behind the grasp; as it comes onto the axis
+    the point slides forward to the grasp, so the fingers arrive along the approach; and while the gripper
+    is still turned away it stays back, so turning does not sweep the fingers into the object.
+    ``approach_standoff_m = 0``: the grasp itself (the paper). Continuous in the pose; broadcasts;
+    returns ``(..., 3)``."""
+    g = np.asarray(goal_position, dtype=float)
+    if cfg.approach_standoff_m <= 0.0:
+        return g
+    z = quat_z_axis(goal_quat)
+    d = np.asarray(position, dtype=float) - g
+    along = np.sum(d * z, axis=-1, keepdims=True)
+    lateral = norms(d - along * z)[..., None]
+    theta = np.minimum(quat_angle(goal_quat, quat), 0.5 * np.pi)[..., None]
+    back = np.maximum(np.minimum(cfg.approach_standoff_m, cfg.approach_funnel * lateral),
+                      cfg.approach_turn_m * np.sin(theta))
+    return g - z * back
 
 
 def move_linear(position: FloatArray, goal_position: FloatArray, cfg: MoveConfig) -> FloatArray:
@@ -91,7 +126,8 @@ def ho_robot_twist(
         return ho_twist(w, goal_gradients(position, quat, user_twist, goal_positions, goal_quats, cfg.intent, cfg.ho))
     p1, q1 = integrate_pose(position, quat, user_twist, cfg.intent.action_apply_time_s)
     gp, gq = nearest_goal_poses(p1, q1, goal_positions, goal_quats, cfg.intent)
-    return np.concatenate((ho_linear(p1, gp, w, cfg), ho_angular(q1, gq, w, cfg)), axis=-1)
+    aim = approach_points(np.asarray(p1)[..., None, :], np.asarray(q1)[..., None, :], gp, gq, cfg.move)
+    return np.concatenate((ho_linear(p1, aim, w, cfg), ho_angular(q1, gq, w, cfg)), axis=-1)
 
 
 def _goal_weights(weights: FloatArray) -> FloatArray:

@@ -461,8 +461,9 @@ def warm_up(cfg: Config) -> None:
 
 
 def supported(cfg: Config) -> bool:
-    """Whether :func:`roll` implements ``cfg``'s model (the default HO generator and step cost)."""
-    return cfg.ho.generator == "moves" and cfg.intent.step_cost == "path"
+    """Whether :func:`roll` implements ``cfg``'s model (the default HO generator and step cost, the
+    straight approach: ``move.approach_standoff_m = 0``)."""
+    return cfg.ho.generator == "moves" and cfg.intent.step_cost == "path" and cfg.move.approach_standoff_m <= 0.0
 
 
 def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -29,7 +29,8 @@ Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 **Two forms.** This module integrates the batch with numpy passes over whole arrays: the readable
 reference. :mod:`.kernel` computes the same rollouts compiled (numba), one fused loop per rollout,
 split over ``planner.threads`` threads, 2-3x faster; :class:`Rollouts` uses it wherever it implements
-the configuration (:func:`.kernel.supported`: the default HO generator and step cost), and the tests
+the configuration (:func:`.kernel.supported`: the default HO generator and step cost, the straight
+approach), and the tests
 hold the two equal on random problems. Without watched steps the watch arrays and ``loglik`` are empty.
 
 **Separation.** Every velocity generator's linear part depends on the position alone and its angular
@@ -37,7 +38,10 @@ part on the orientation alone, and the user drives one of the two. So in transla
 orientation of a rollout does not depend on ``g`` and is integrated once per ``(c, a)``; in rotation
 mode the position is. The quaternion work, the expensive part, is then ``G`` times smaller in
 translation mode. Tracked HO depends on ``g`` through its belief in the part the user does not drive
-too: that part of HO's pose alone is kept per goal, apart from the arrays of the other actions.
+too: that part of HO's pose alone is kept per goal, apart from the arrays of the other actions. The
+approach corridor (``move.approach_standoff_m > 0``, :func:`~..model.twists.approach_points`) breaks the
+separation: the linear part then depends on the orientation too, so in rotation mode positions become
+per goal as well (numpy broadcasts them so; the kernel does not implement the corridor).
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from ..model.actions import Action, ActionKind, Mode
 from ..model.huber import marginal_nll_driven, pregrasp_points, q_minus_v_driven
 from ..model.reward import approach_return, distance_reward, opposes
 from ..model.twists import (
+    approach_points,
     assisted_speeds,
     ho_angular,
     ho_linear,
@@ -172,7 +177,7 @@ class Rollouts:
         for s in range(steps):
             u_lin = user_linear(P, gp, pre, speed[0], standoff) if translating else zero
             u_ang = zero if translating else user_angular(Q, gq, speed[1])
-            r_lin = np.where(move_m, move_linear(P, mp, cfg.move), 0.0)
+            r_lin = np.where(move_m, move_linear(P, approach_points(P, Q, mp, mq, cfg.move), cfg.move), 0.0)
             r_ang = np.where(move_m, move_angular(Q, mq, cfg.move), 0.0)
             if ho:  # HO under its belief, after the user's twist
                 w = np.exp(log_w - log_w.max(axis=-1, keepdims=True))
@@ -182,7 +187,8 @@ class Rollouts:
                 else:
                     p1 = free if tracked else P[:, :, h]
                     q1 = turn(Q[:, :, h], u_ang[:, :, h], t_apply)
-                ho_lin, ho_ang = ho_linear(p1, kp, w, cfg), ho_angular(q1, kq, w, cfg)
+                aim = approach_points(p1[..., None, :], q1[..., None, :], kp, kq, cfg.move)
+                ho_lin, ho_ang = ho_linear(p1, aim, w, cfg), ho_angular(q1, kq, w, cfg)
                 if not (tracked and not translating):
                     r_lin[:, :, h] = ho_lin
                 if not (tracked and translating):
