@@ -6,6 +6,7 @@
     [input]      # filter_hz: the tremor filter
     [blend]      # alpha: the assistance level, 0.2-0.8 in a profile
     [planner]    # switch_margin: a steadier arm (fewer changes of the assistance's mind on near ties)
+    [move]       # approach_standoff_m: the approach corridor, for a person who closes at the grasp
     [speech]     # voice, rate_wpm, volume of the questions
     [asking]     # max_per_task, answer_sources, third_answer, withdraw_yes_s, withdraw_no_s, learn_answer_time
     [reward]     # question_time_s: how long this person's questions stop the arm (s), what the planner charges
@@ -33,6 +34,9 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
     "input": frozenset({"filter_hz"}),
     "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share"}),
     "planner": frozenset({"switch_margin"}),
+    # The approach corridor suits a person who closes at the grasp, not one who closes early
+    # (docs/results.md, "Session 48"): it is theirs to switch on.
+    "move": frozenset({"approach_standoff_m"}),
     "speech": frozenset({"voice", "rate_wpm", "volume"}),
     "asking": frozenset({"max_per_task", "answer_sources", "third_answer", "withdraw_yes_s",
                           "withdraw_no_s", "learn_answer_time"}),

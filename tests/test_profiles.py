@@ -53,6 +53,9 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     steady = parse_profile({"name": "ana", "planner": {"switch_margin": 50.0}}, "ana.toml").apply(Config())
     assert steady.planner.switch_margin == 50.0  # a steadier arm (docs/profiles.md)
     assert steady.planner.model_dump() | {"switch_margin": 0.0} == Config().planner.model_dump()
+    corridor = parse_profile({"name": "jo", "move": {"approach_standoff_m": 0.06}}, "jo.toml").apply(Config())
+    assert corridor.move.approach_standoff_m == 0.06  # the approach corridor (docs/profiles.md)
+    assert corridor.move.model_dump() | {"approach_standoff_m": 0.0} == Config().move.model_dump()
     assert p.keys() == ["asking.answer_sources", "asking.max_per_task", "blend.alpha", "input.filter_hz",
                         "joystick.deadzone", "joystick.gains", "speech.rate_wpm", "speech.voice"]
 
@@ -62,6 +65,8 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     ({"name": "a", "blend": {"alpha": 0.1}}, "blend.alpha"),
     ({"name": "a", "planner": {"horizon_s": 1}}, "planner.horizon_s"),  # the planner's model is not a person's
     ({"name": "a", "planner": {"switch_margin": -1}}, "switch_margin"),
+    ({"name": "a", "move": {"approach_standoff_m": -0.01}}, "approach_standoff_m"),
+    ({"name": "a", "move": {"linear_max_mps": 0.3}}, "move.linear_max_mps"),  # the arm's speed is not a person's
     ({"name": "a", "model": {"alpha": 0.5}}, "model"),  # not a profile section
     ({"name": "a", "speech": {"enabled": False}}, "speech.enabled"),  # not a profile key
     ({"name": "a", "joystick": {"gains": [5, 1, 1]}}, "gains"),
