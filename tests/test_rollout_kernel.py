@@ -41,11 +41,16 @@ def _problem(rng: np.random.Generator, C: int = 3, G: int = 5, twins: bool = Fal
     return positions, quats, weights, kp, kq, actions
 
 
-@pytest.mark.parametrize("mode, belief, terminal, watch_steps, charge", list(itertools.product(
-    (Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2), (0.0, 0.2))))
-def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps, charge):
+@pytest.mark.parametrize("mode, belief, terminal, watch_steps, charge, corridor", [
+    *itertools.product((Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed", "approach"), (0, 2),
+                       (0.0, 0.2), (0.0,)),
+    # the approach corridor (move.approach_standoff_m), in both modes and both HO beliefs
+    *itertools.product((Mode.TRANSLATION, Mode.ROTATION), ("tracked", "fixed"), ("fixed",), (2,), (0.0,), (0.06,)),
+])
+def test_the_compiled_rollouts_equal_the_numpy_ones(mode, belief, terminal, watch_steps, charge, corridor):
     cfg = config_from_dict({"planner": {"ho_belief": belief, "terminal": terminal, "threads": 1},  # one block
-                            "intent": {"rotation_rationality": 200.0, "turn_charge": charge}}, "test")
+                            "intent": {"rotation_rationality": 200.0, "turn_charge": charge},
+                            "move": {"approach_standoff_m": corridor}}, "test")
     assert kernel.supported(cfg)
     rng = np.random.default_rng(7)
     arrivals = 0

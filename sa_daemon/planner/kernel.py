@@ -5,8 +5,9 @@ with about sixty numpy passes a step over arrays of ``C G A`` poses; most of a p
 those passes and their temporaries (``docs/model.md``, "Where the rest goes"). This module computes the
 same model rollout by rollout in one compiled loop (numba), with scalar quaternion algebra and no
 temporaries. It implements the defaults, ``ho.generator = "moves"`` and ``intent.step_cost = "path"``,
-in both joystick modes, both HO beliefs (``planner.ho_belief``) and both terminal values
-(``planner.terminal``); :class:`~.rollouts.Rollouts` keeps the numpy form as the reference (the tests hold
+in both joystick modes, both HO beliefs (``planner.ho_belief``), both terminal values
+(``planner.terminal``) and with or without the approach corridor (``move.approach_standoff_m``; turning,
+a move's position then depends on the orientation and is integrated per goal); :class:`~.rollouts.Rollouts` keeps the numpy form as the reference (the tests hold
 the two equal to rounding) and for the other options.
 
 Per rollout and step, as in :mod:`.rollouts`: the user's twist in the driven part toward ``g`` (the
@@ -87,6 +88,25 @@ def _clip(x, y, z, limit):
     """``(x, y, z)`` scaled down to a norm of at most ``limit``."""
     f = min(1.0, limit / max(math.sqrt(x * x + y * y + z * z), 1e-12))
     return x * f, y * f, z * f
+
+
+@njit(cache=True, inline="always")
+def _aim(px, py, pz, qw, qx, qy, qz, j, kp, kq, standoff, funnel, turn):
+    """The point (m) a move or HO heads for toward goal ``j`` from pose ``(p, q)`` with the approach corridor
+    on (``twists.approach_points``): ``s`` behind ``j``'s grasp along its approach axis, ``s = max(min(
+    standoff, funnel l), turn sin(min(theta, pi/2)))``, ``l`` the distance from the axis, ``theta`` the angle
+    from the grasp's orientation."""
+    gw, gx, gy, gz = kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3]
+    n = math.sqrt(gw * gw + gx * gx + gy * gy + gz * gz)
+    nw, nx, ny, nz = gw / n, gx / n, gy / n, gz / n
+    zx, zy, zz = 2.0 * (nx * nz + nw * ny), 2.0 * (ny * nz - nw * nx), 1.0 - 2.0 * (nx * nx + ny * ny)
+    dx, dy, dz = px - kp[j, 0], py - kp[j, 1], pz - kp[j, 2]
+    along = dx * zx + dy * zy + dz * zz
+    lx, ly, lz = dx - along * zx, dy - along * zy, dz - along * zz
+    lateral = math.sqrt(lx * lx + ly * ly + lz * lz)
+    theta = min(_angle(gw, gx, gy, gz, qw, qx, qy, qz), 0.5 * math.pi)
+    back = max(min(standoff, funnel * lateral), turn * math.sin(theta))
+    return kp[j, 0] - zx * back, kp[j, 1] - zy * back, kp[j, 2] - zz * back
 
 
 @njit(cache=True, inline="always")
@@ -194,7 +214,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
     ``fp``: user speed (m/s, rad/s), stand-off (m), alpha, the apply time ``T`` (s), opposition penalty per
     rollout step, opposition threshold, input samples per step x rationality, rotation scale, paper steps
     per rollout step ``k``, terminal paper steps, move gains and top speeds (linear, angular), the turn
-    charge times ``T``. ``pre``: the goals' pre-grasp points; ``anchor``: where the turn charge is
+    charge times ``T``, the approach corridor's stand-off (m; 0: the straight line), funnel and turn term (m).
+    ``pre``: the goals' pre-grasp points; ``anchor``: where the turn charge is
     measured (m, :class:`~.rollouts.Rollouts`).
     ``hp``: the translation and rotation Huber ``c, delta, a, weight``. ``kind``/``targets``: per action
     its kind and, for moves, its goal.
@@ -203,6 +224,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
     sp_t, sp_r, standoff, alpha, T = fp[0], fp[1], fp[2], fp[3], fp[4]
     per_step, th, samples, rot_scale, k, tail = fp[5], fp[6], fp[7], fp[8], fp[9], fp[10]
     g_t, m_t, g_r, m_r, ct = fp[11], fp[12], fp[13], fp[14], fp[15]
+    a_s, a_f, a_t = fp[16], fp[17], fp[18]  # the approach corridor (off at a_s = 0)
+    corridor = a_s > 0.0
     goal = rp[5]
     shared = np.empty((steps + 1, 4))  # the part the user does not drive, per (c, a) for moves and no-assist
     lw = np.empty(G)
@@ -264,6 +287,8 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
         for a in range(A):
             ho = kind[a] == HO
             t = targets[a]
+            # a move's position, turning with the corridor on, depends on the orientation, so on g: its own
+            own = corridor and not translating and kind[a] == MOVE
             if not ho:  # the undriven part: the robot's share of a move, nothing for no-assist
                 if translating:
                     sw, sx, sy, sz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
@@ -341,9 +366,15 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
                             lx = ly = lz = hx = hy = hz = 0.0
                             for j in range(G):
                                 wj = ws[j] / total_w
-                                lx += wj * kp[j, 0]
-                                ly += wj * kp[j, 1]
-                                lz += wj * kp[j, 2]
+                                if corridor:
+                                    ax, ay, az = _aim(p1x, p1y, p1z, tw, tx, ty, tz, j, kp, kq, a_s, a_f, a_t)
+                                    lx += wj * ax
+                                    ly += wj * ay
+                                    lz += wj * az
+                                else:
+                                    lx += wj * kp[j, 0]
+                                    ly += wj * kp[j, 1]
+                                    lz += wj * kp[j, 2]
                                 o = same_q[j]
                                 if translating and s == 0:
                                     vx, vy, vz, d1 = rot0[o, 0], rot0[o, 1], rot0[o, 2], rot0[o, 3]
@@ -385,11 +416,16 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
                             else:
                                 rx, ry, rz, ox, oy, oz = hx, hy, hz, lx, ly, lz
                         elif kind[a] == MOVE:
+                            ax, ay, az = kp[t, 0], kp[t, 1], kp[t, 2]
+                            if corridor:
+                                ax, ay, az = _aim(px, py, pz, qw, qx, qy, qz, t, kp, kq, a_s, a_f, a_t)
                             if translating:
-                                rx, ry, rz = _clip(g_t * (kp[t, 0] - px), g_t * (kp[t, 1] - py), g_t * (kp[t, 2] - pz), m_t)
+                                rx, ry, rz = _clip(g_t * (ax - px), g_t * (ay - py), g_t * (az - pz), m_t)
                             else:
                                 vx, vy, vz, _ = _rot_err(kq[t, 0], kq[t, 1], kq[t, 2], kq[t, 3], qw, qx, qy, qz)
                                 rx, ry, rz = _clip(g_r * vx, g_r * vy, g_r * vz, m_r)
+                                if own:
+                                    ox, oy, oz = _clip(g_t * (ax - px), g_t * (ay - py), g_t * (az - pz), m_t)
                         opposed = ((ux * rx < 0.0 and abs(ux) > th and abs(rx) > th)
                                    or (uy * ry < 0.0 and abs(uy) > th and abs(ry) > th)
                                    or (uz * rz < 0.0 and abs(uz) > th and abs(rz) > th))
@@ -422,7 +458,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
                                 qw, qx, qy, qz = shared[s + 1, 0], shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
                         else:
                             qw, qx, qy, qz = _turn(qw, qx, qy, qz, bx, by, bz, dt)
-                            if ho:
+                            if ho or own:
                                 px, py, pz = px + alpha * ox * dt, py + alpha * oy * dt, pz + alpha * oz * dt
                             else:
                                 px, py, pz = shared[s + 1, 1], shared[s + 1, 2], shared[s + 1, 3]
@@ -461,9 +497,8 @@ def warm_up(cfg: Config) -> None:
 
 
 def supported(cfg: Config) -> bool:
-    """Whether :func:`roll` implements ``cfg``'s model (the default HO generator and step cost, the
-    straight approach: ``move.approach_standoff_m = 0``)."""
-    return cfg.ho.generator == "moves" and cfg.intent.step_cost == "path" and cfg.move.approach_standoff_m <= 0.0
+    """Whether :func:`roll` implements ``cfg``'s model (the default HO generator and step cost)."""
+    return cfg.ho.generator == "moves" and cfg.intent.step_cost == "path"
 
 
 def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -475,7 +510,8 @@ def parameters(cfg: Config, speed: tuple[float, float], dt: float) -> tuple[Floa
                    rw.opposition_penalty * dt / rw.step_s, rw.opposition_threshold,
                    cfg.runtime.belief_hz * dt * it.rationality, it.rotation_scale, dt / rw.step_s,
                    cfg.planner.terminal_s / rw.step_s, mv.linear_gain, mv.linear_max_mps, mv.angular_gain,
-                   mv.angular_max_radps, it.turn_charge * it.action_apply_time_s], dtype=float)
+                   mv.angular_max_radps, it.turn_charge * it.action_apply_time_s, mv.approach_standoff_m,
+                   mv.approach_funnel, mv.approach_turn_m], dtype=float)
     hp = np.array([it.translation.c, it.translation.delta, it.translation.a, it.translation.weight,
                    it.rotation.c, it.rotation.delta, it.rotation.a, it.rotation.weight], dtype=float)
     rp = np.array([rw.scale, rw.beta, rw.rotation_threshold_m, rw.goal_translation_m, rw.goal_rotation_rad, rw.goal,

@@ -29,8 +29,7 @@ Committing to ``a`` for ``s`` steps from start ``c`` under belief ``b`` is worth
 **Two forms.** This module integrates the batch with numpy passes over whole arrays: the readable
 reference. :mod:`.kernel` computes the same rollouts compiled (numba), one fused loop per rollout,
 split over ``planner.threads`` threads, 2-3x faster; :class:`Rollouts` uses it wherever it implements
-the configuration (:func:`.kernel.supported`: the default HO generator and step cost, the straight
-approach), and the tests
+the configuration (:func:`.kernel.supported`: the default HO generator and step cost), and the tests
 hold the two equal on random problems. Without watched steps the watch arrays and ``loglik`` are empty.
 
 **Separation.** Every velocity generator's linear part depends on the position alone and its angular
@@ -41,7 +40,7 @@ translation mode. Tracked HO depends on ``g`` through its belief in the part the
 too: that part of HO's pose alone is kept per goal, apart from the arrays of the other actions. The
 approach corridor (``move.approach_standoff_m > 0``, :func:`~..model.twists.approach_points`) breaks the
 separation: the linear part then depends on the orientation too, so in rotation mode positions become
-per goal as well (numpy broadcasts them so; the kernel does not implement the corridor).
+per goal as well (numpy broadcasts them so; the kernel integrates such a move's position per goal).
 """
 
 from __future__ import annotations
