@@ -7,8 +7,9 @@ same model rollout by rollout in one compiled loop (numba), with scalar quaterni
 temporaries. It implements the defaults, ``ho.generator = "moves"`` and ``intent.step_cost = "path"``,
 in both joystick modes, both HO beliefs (``planner.ho_belief``), both terminal values
 (``planner.terminal``) and with or without the approach corridor (``move.approach_standoff_m``; turning,
-a move's position then depends on the orientation and is integrated per goal); :class:`~.rollouts.Rollouts` keeps the numpy form as the reference (the tests hold
-the two equal to rounding) and for the other options.
+a move's position then depends on the orientation and is integrated per goal);
+:class:`~.rollouts.Rollouts` keeps the numpy form as the reference (the tests hold the two equal to
+rounding) and for the other options.
 
 Per rollout and step, as in :mod:`.rollouts`: the user's twist in the driven part toward ``g`` (the
 pre-grasp point first in translation), the robot's twist (move-to-goal toward its own goal; HO the move
@@ -90,21 +91,31 @@ def _clip(x, y, z, limit):
     return x * f, y * f, z * f
 
 
+@njit(cache=True)
+def _approach_axes(kq):
+    """Each goal's approach axis, the gripper's z at its grasp (``geometry.quat_z_axis``), ``(G, 3)``."""
+    out = np.empty((kq.shape[0], 3))
+    for j in range(kq.shape[0]):
+        gw, gx, gy, gz = kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3]
+        n = math.sqrt(gw * gw + gx * gx + gy * gy + gz * gz)
+        nw, nx, ny, nz = gw / n, gx / n, gy / n, gz / n
+        out[j, 0], out[j, 1], out[j, 2] = 2.0 * (nx * nz + nw * ny), 2.0 * (ny * nz - nw * nx), \
+            1.0 - 2.0 * (nx * nx + ny * ny)
+    return out
+
+
 @njit(cache=True, inline="always")
-def _aim(px, py, pz, qw, qx, qy, qz, j, kp, kq, standoff, funnel, turn):
+def _aim(px, py, pz, qw, qx, qy, qz, j, kp, kq, kz, standoff, funnel, turn):
     """The point (m) a move or HO heads for toward goal ``j`` from pose ``(p, q)`` with the approach corridor
-    on (``twists.approach_points``): ``s`` behind ``j``'s grasp along its approach axis, ``s = max(min(
-    standoff, funnel l), turn sin(min(theta, pi/2)))``, ``l`` the distance from the axis, ``theta`` the angle
-    from the grasp's orientation."""
-    gw, gx, gy, gz = kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3]
-    n = math.sqrt(gw * gw + gx * gx + gy * gy + gz * gz)
-    nw, nx, ny, nz = gw / n, gx / n, gy / n, gz / n
-    zx, zy, zz = 2.0 * (nx * nz + nw * ny), 2.0 * (ny * nz - nw * nx), 1.0 - 2.0 * (nx * nx + ny * ny)
+    on (``twists.approach_points``): ``s`` behind ``j``'s grasp along its approach axis ``kz[j]``
+    (:func:`_approach_axes`), ``s = max(min(standoff, funnel l), turn sin(min(theta, pi/2)))``, ``l`` the
+    distance from the axis, ``theta`` the angle from the grasp's orientation."""
+    zx, zy, zz = kz[j, 0], kz[j, 1], kz[j, 2]
     dx, dy, dz = px - kp[j, 0], py - kp[j, 1], pz - kp[j, 2]
     along = dx * zx + dy * zy + dz * zz
     lx, ly, lz = dx - along * zx, dy - along * zy, dz - along * zz
     lateral = math.sqrt(lx * lx + ly * ly + lz * lz)
-    theta = min(_angle(gw, gx, gy, gz, qw, qx, qy, qz), 0.5 * math.pi)
+    theta = min(_angle(kq[j, 0], kq[j, 1], kq[j, 2], kq[j, 3], qw, qx, qy, qz), 0.5 * math.pi)
     back = max(min(standoff, funnel * lateral), turn * math.sin(theta))
     return kp[j, 0] - zx * back, kp[j, 1] - zy * back, kp[j, 2] - zz * back
 
@@ -246,6 +257,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
     ll0 = np.empty((G if watch_steps > 0 else 0, G))
     acc = np.empty(G)  # a rollout's log-likelihood so far, stored once (a start computed twice stores the same)
     same_q = _first_same(kq)
+    kz = _approach_axes(kq) if corridor else np.empty((0, 3))  # the corridor's axes, computed once a call
     path = np.empty((G, steps, 9))  # turning, per rollout and step: position, quaternion, angle to g, opposed
     has_ho = False
     for a in range(A):
@@ -289,7 +301,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
             t = targets[a]
             # a move's position, turning with the corridor on, depends on the orientation, so on g: its own
             own = corridor and not translating and kind[a] == MOVE
-            if not ho:  # the undriven part: the robot's share of a move, nothing for no-assist
+            if not (ho or own):  # the undriven part: the robot's share of a move, nothing for no-assist
                 if translating:
                     sw, sx, sy, sz = quats[c, 0], quats[c, 1], quats[c, 2], quats[c, 3]
                 else:
@@ -367,7 +379,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
                             for j in range(G):
                                 wj = ws[j] / total_w
                                 if corridor:
-                                    ax, ay, az = _aim(p1x, p1y, p1z, tw, tx, ty, tz, j, kp, kq, a_s, a_f, a_t)
+                                    ax, ay, az = _aim(p1x, p1y, p1z, tw, tx, ty, tz, j, kp, kq, kz, a_s, a_f, a_t)
                                     lx += wj * ax
                                     ly += wj * ay
                                     lz += wj * az
@@ -418,7 +430,7 @@ def roll(positions, quats, log_w0, kp, kq, pre, anchor, kind, targets, translati
                         elif kind[a] == MOVE:
                             ax, ay, az = kp[t, 0], kp[t, 1], kp[t, 2]
                             if corridor:
-                                ax, ay, az = _aim(px, py, pz, qw, qx, qy, qz, t, kp, kq, a_s, a_f, a_t)
+                                ax, ay, az = _aim(px, py, pz, qw, qx, qy, qz, t, kp, kq, kz, a_s, a_f, a_t)
                             if translating:
                                 rx, ry, rz = _clip(g_t * (ax - px), g_t * (ay - py), g_t * (az - pz), m_t)
                             else:
