@@ -199,6 +199,13 @@ class BlendConfig(_Section):
         "periods with input over this window (s); 0 = opposition only costs in the planner's reward (the paper)",
     )
     opposition_share: float = Field(0.8, gt=0, le=1, description="the share of opposed periods that makes the robot yield")
+    churn_window_s: float = Field(
+        10.0, ge=0, le=60,
+        description="the robot yields while the user has switched joystick mode churn_switches times within this "
+        "window (s): a user turning, translating and turning again because the assistance undoes, in the mode "
+        "they left, a grasp pose of their own (the default since session 49, docs/model.md); 0 = never (the paper)",
+    )
+    churn_switches: int = Field(6, ge=2, le=100, description="the mode switches within churn_window_s that make the robot yield")
 
 
 class RewardConfig(_Section):

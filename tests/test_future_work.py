@@ -1,6 +1,7 @@
-"""The paper's future work (section VI-E.4), as switches off by default (the paper's behaviour): the
-robot stops assisting near the object the belief settles on, and yields to a user who keeps opposing
-its assistance over a window (so a pose outside every list can be reached)."""
+"""The paper's future work (section VI-E.4, VII), as switches: the robot stops assisting near the object the
+belief settles on, yields to a user who keeps opposing its assistance over a window (both off by default:
+the paper's behaviour), or who keeps switching joystick mode (on by default since session 49), so a pose
+outside every list can be reached."""
 
 from __future__ import annotations
 
@@ -79,14 +80,78 @@ def test_a_user_who_keeps_opposing_the_assistance_is_followed_then_assisted_agai
     tick, t = _run(ctl, start, -away, 1.5, t0=t)  # the user goes along with it again
     assert ctl.yielding is None and np.any(tick.command.robot_twist)
     assert r is not None
-    off = _ctl()
+    off = _ctl()  # (no mode switch here, so the default's yield to mode churn never acts)
     tick, _ = _run(off, start, away, 2.0)
     assert off.yielding is None and np.any(tick.command.robot_twist)  # the paper: HO keeps assisting
 
 
-def test_the_switches_default_to_the_papers_behaviour():
+def _switching(ctl: Controller, pose: Pose, every_s: float | None, seconds: float, t0: float = 0.0):
+    """A user pushing the stick who switches joystick mode at every whole multiple of ``every_s`` seconds
+    (``None``: never)."""
+    st = ArmState(pose, False, None, None)
+    t, tick = t0, None
+    while t < t0 + seconds - 1e-9:
+        if every_s is not None and t > 0.0 and int((t + 1e-9) / every_s) > int((t - DT + 1e-9) / every_s):
+            ctl.toggle_mode()
+        ctl.on_input([0.2, 0.1, 0.0], t)
+        tick = ctl.tick(st, t)
+        t += DT
+    return tick, t
+
+
+def test_a_user_who_keeps_switching_mode_is_left_to_finish_alone_then_assisted_again():
+    start = SCENE.start
+    ctl = _ctl(churn_window_s=10.0, churn_switches=6)
+    tick, t = _switching(ctl, start, 1.0, 5.5)  # switches at 1, 2, 3, 4, 5 s: five
+    assert ctl.yielding is None and np.any(tick.command.robot_twist)
+    tick, t = _switching(ctl, start, 1.0, 1.0, t0=t)  # the sixth, at 6 s
+    assert ctl.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
+    assert tick.command.action.kind is ActionKind.NONE
+    assert np.allclose(tick.command.total_twist, ctl.user_twist)  # the user's own twist, unscaled
+    tick, t = _switching(ctl, start, None, 4.5, t0=t)  # none since: still six within the window at 10.5 s
+    assert ctl.yielding == "mode_churn"
+    tick, t = _switching(ctl, start, None, 1.0, t0=t)  # at 11.5 s the first has left the window: five
+    assert ctl.yielding is None and np.any(tick.command.robot_twist)
+    ctl.reset()
+    _switching(ctl, start, None, 0.5, t0=t)  # a new task forgets the switches of the last
+    assert ctl.yielding is None
+
+
+def test_mode_churn_is_on_by_default_off_at_a_zero_window_and_its_settings_are_checked():
+    ctl = _ctl()
+    tick, _ = _switching(ctl, SCENE.start, 0.5, 10.0)  # twenty switches in 10 s
+    assert ctl.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
+    ctl = _ctl(churn_window_s=0.0)
+    tick, _ = _switching(ctl, SCENE.start, 0.5, 10.0)
+    assert ctl.yielding is None and np.any(tick.command.robot_twist)  # the paper keeps assisting
+    with pytest.raises(Exception, match="churn_switches"):
+        config_from_dict({"blend": {"churn_switches": 1}})
+    with pytest.raises(Exception, match="churn_window_s"):
+        config_from_dict({"blend": {"churn_window_s": -1.0}})
+
+
+def test_the_livelock_of_a_pose_on_no_list_ends_when_the_robot_yields_to_the_switching():
+    """End to end (session 49): Table I's `cup:top` with HO for the user whose grasp is on no list. By
+    default the assistance turns the gripper back toward a listed pose while the user translates and
+    translates it away while they turn: the user switches mode again and again and the trial times out
+    (57 switches on this machine). Yielding to the switching, the user finishes alone."""
+    from sa_daemon.sim.episode import run_trial
+    from sa_daemon.sim.users import load_user
+
+    prof = load_user("own-pose-off-list")
+    runs = {}
+    for window in (0.0, 10.0):
+        cfg = prof.apply(config_from_dict({"blend": {"churn_window_s": window}}))
+        runs[window] = run_trial(SCENE, "cup:top", "ho", 1711, cfg, user_name=prof.name)
+    stuck, freed = runs[0.0], runs[10.0]
+    assert not stuck.success and stuck.mode_changes >= 30
+    assert freed.success and freed.mode_changes <= 12 and freed.completion_time_s < 60.0
+
+
+def test_the_switches_default_to_the_papers_behaviour_but_mode_churn():
     b = config_from_dict({}).blend
     assert b.yield_near_m == 0.0 and b.opposition_window_s == 0.0
+    assert (b.churn_window_s, b.churn_switches) == (10.0, 6)  # session 49: docs/results.md
     with pytest.raises(Exception, match="yield_near_belief"):
         config_from_dict({"blend": {"yield_near_belief": 0.3}})
 

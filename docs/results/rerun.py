@@ -38,6 +38,7 @@ BEFORE_THE_KEY = {
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
     "asking": {"withdraw_no_s": 0.0, "withdraw_yes_s": 0.0, "learn_answer_time": False},
+    "blend": {"churn_window_s": 0.0},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the
@@ -54,7 +55,8 @@ without ``planner.rank_goals`` (session 32) ranked the top goals by their own pr
 equal shares, and one without ``planner.user_speed_unused`` (session 35) predicted a mode not yet entered
 still (``"poses"`` and ``"deflection"`` since session 37); one without ``asking.learn_answer_time``
 (session 39) charged every question ``reward.question_time_s``; one without ``intent.reach_pose`` (session
-25) drove the moves to ``k_c`` (``"tracked_moves"`` since session 43), and one without
+25) drove the moves to ``k_c`` (``"tracked_moves"`` since session 43), one without ``blend.churn_window_s``
+(session 49) never yielded to a user who keeps switching mode, and one without
 ``intent.keep_pose_posterior`` (session 42) started each copy's pose weights afresh (kept since session 43). The ``-turn-charge`` files (session 22) measured
 the charge where the gripper was; since session 23 it is measured where the user last translated, so they
 rerun with that measure (the ``-turn-anchor`` files')."""

@@ -1,9 +1,9 @@
-"""When the robot yields: the paper's future work (section VI-E.4, VII), both off by default.
+"""When the robot yields: the paper's future work (section VI-E.4, VII), all off by default.
 
-Two free functions of the controller's state, each returning the reason the robot should not assist
+Three free functions of the controller's state, each returning the reason the robot should not assist
 now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; and :class:`OppositionWindow`, the short
-history of the user's opposition the second one reads. The controller turns moves and HO into
-no-assistance while either gives a reason.
+history of the user's opposition the first one reads. The controller turns moves and HO into
+no-assistance while any gives a reason.
 """
 
 from __future__ import annotations
@@ -51,6 +51,16 @@ def user_opposes(window: OppositionWindow, t: float, share: float) -> str | None
     least half of it) opposed the assistance: the user wants a pose of their own."""
     opposed, n, span = window.counts(t)
     return "user_opposes" if span >= 0.5 * window.window_s and opposed >= share * n else None
+
+
+def mode_churn(switch_times: deque[float], t: float, window_s: float, switches: int) -> str | None:
+    """``"mode_churn"`` when the user has switched joystick mode at least ``switches`` times over the last
+    ``window_s`` seconds before ``t`` (s): turning, switching to translate, switching back to turn again,
+    while the assistance undoes in the mode they left what they did in it (a grasp pose of their own;
+    ``docs/model.md``, session 49). ``switch_times`` (s, oldest first) is pruned to the window."""
+    while switch_times and switch_times[0] < t - window_s:
+        switch_times.popleft()
+    return "mode_churn" if len(switch_times) >= switches else None
 
 
 def near_object(goals: GoalSet, probs: np.ndarray, pose: Pose, distance_m: float, belief_share: float) -> str | None:
