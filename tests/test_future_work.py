@@ -26,10 +26,15 @@ def _ctl(**blend) -> Controller:
     return ctl
 
 
-def _run(ctl: Controller, pose: Pose, axes, seconds: float, t0: float = 0.0):
+def _run(ctl: Controller, pose: Pose, axes, seconds: float, t0: float = 0.0, switch_every_s: float | None = None):
+    """``axes`` held for ``seconds`` from ``t0``; with ``switch_every_s`` the user also switches joystick mode
+    at every whole multiple of it."""
     st = ArmState(pose, False, None, None)
     t, tick = t0, None
     while t < t0 + seconds:
+        k = switch_every_s
+        if k is not None and t > 0.0 and int((t + 1e-9) / k) > int((t - DT + 1e-9) / k):
+            ctl.toggle_mode()
         ctl.on_input(axes, t)
         tick = ctl.tick(st, t)
         t += DT
@@ -85,44 +90,33 @@ def test_a_user_who_keeps_opposing_the_assistance_is_followed_then_assisted_agai
     assert off.yielding is None and np.any(tick.command.robot_twist)  # the paper: HO keeps assisting
 
 
-def _switching(ctl: Controller, pose: Pose, every_s: float | None, seconds: float, t0: float = 0.0):
-    """A user pushing the stick who switches joystick mode at every whole multiple of ``every_s`` seconds
-    (``None``: never)."""
-    st = ArmState(pose, False, None, None)
-    t, tick = t0, None
-    while t < t0 + seconds - 1e-9:
-        if every_s is not None and t > 0.0 and int((t + 1e-9) / every_s) > int((t - DT + 1e-9) / every_s):
-            ctl.toggle_mode()
-        ctl.on_input([0.2, 0.1, 0.0], t)
-        tick = ctl.tick(st, t)
-        t += DT
-    return tick, t
+PUSH = [0.2, 0.1, 0.0]  # a user pushing the stick
 
 
 def test_a_user_who_keeps_switching_mode_is_left_to_finish_alone_then_assisted_again():
     start = SCENE.start
     ctl = _ctl(churn_window_s=10.0, churn_switches=6)
-    tick, t = _switching(ctl, start, 1.0, 5.5)  # switches at 1, 2, 3, 4, 5 s: five
+    tick, t = _run(ctl, start, PUSH, 5.5, switch_every_s=1.0)  # switches at 1, 2, 3, 4, 5 s: five
     assert ctl.yielding is None and np.any(tick.command.robot_twist)
-    tick, t = _switching(ctl, start, 1.0, 1.0, t0=t)  # the sixth, at 6 s
+    tick, t = _run(ctl, start, PUSH, 1.0, t0=t, switch_every_s=1.0)  # the sixth, at 6 s
     assert ctl.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
     assert tick.command.action.kind is ActionKind.NONE
     assert np.allclose(tick.command.total_twist, ctl.user_twist)  # the user's own twist, unscaled
-    tick, t = _switching(ctl, start, None, 4.5, t0=t)  # none since: still six within the window at 10.5 s
+    tick, t = _run(ctl, start, PUSH, 4.0, t0=t)  # none since: still six within the window at 10.5 s
     assert ctl.yielding == "mode_churn"
-    tick, t = _switching(ctl, start, None, 1.0, t0=t)  # at 11.5 s the first has left the window: five
+    tick, t = _run(ctl, start, PUSH, 1.0, t0=t)  # at 11.5 s the first has left the window: five
     assert ctl.yielding is None and np.any(tick.command.robot_twist)
     ctl.reset()
-    _switching(ctl, start, None, 0.5, t0=t)  # a new task forgets the switches of the last
+    _run(ctl, start, PUSH, 0.5, t0=t)  # a new task forgets the switches of the last
     assert ctl.yielding is None
 
 
 def test_mode_churn_is_on_by_default_off_at_a_zero_window_and_its_settings_are_checked():
     ctl = _ctl()
-    tick, _ = _switching(ctl, SCENE.start, 0.5, 10.0)  # twenty switches in 10 s
+    tick, _ = _run(ctl, SCENE.start, PUSH, 10.0, switch_every_s=0.5)  # twenty switches in 10 s
     assert ctl.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
     ctl = _ctl(churn_window_s=0.0)
-    tick, _ = _switching(ctl, SCENE.start, 0.5, 10.0)
+    tick, _ = _run(ctl, SCENE.start, PUSH, 10.0, switch_every_s=0.5)
     assert ctl.yielding is None and np.any(tick.command.robot_twist)  # the paper keeps assisting
     with pytest.raises(Exception, match="churn_switches"):
         config_from_dict({"blend": {"churn_switches": 1}})

@@ -62,7 +62,7 @@ the charge where the gripper was; since session 23 it is measured where the user
 rerun with that measure (the ``-turn-anchor`` files')."""
 
 
-def _config(recorded: dict) -> Config:
+def recorded_config(recorded: dict) -> Config:
     """The recorded configuration, keeping only the keys the current code knows. Keys the file lacks take
     their value from before they existed (``BEFORE_THE_KEY``), or else their defaults (a removed key
     cannot have changed the trials of the current code)."""
@@ -105,7 +105,7 @@ def rerun(path: Path, jobs: int, write: bool) -> None:
                                   if "tasks" in meta and "methods" in meta else [])
     if not parts:
         return
-    cfg = _config(meta["config"])
+    cfg = recorded_config(meta["config"])
     users = meta.get("users") or ["calibrated"]
     # The seeds the file holds (runs with --first-seed start elsewhere than 0), else the first meta["seeds"].
     seeds = sorted({t["seed"] for t in data.get("trials", [])}) or range(meta["seeds"])

@@ -19,7 +19,7 @@ import json
 import sys
 from pathlib import Path
 
-from rerun import _config
+from rerun import recorded_config
 
 from sa_daemon.sim.evaluate import (
     TrialSpec,
@@ -40,7 +40,7 @@ def main() -> int:
     args = ap.parse_args()
     data = json.loads(args.src.read_text())
     meta = data["meta"]
-    cfg = _config(meta["config"])
+    cfg = recorded_config(meta["config"])
     cfg = cfg.model_copy(update={"blend": cfg.blend.model_copy(
         update={"churn_window_s": args.window, "churn_switches": args.switches})})
     trials = data["trials"]

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections import deque
 
 import numpy as np
 
@@ -40,7 +39,13 @@ from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
 from .safety import SafetyPipeline
 from .user_speed import UserSpeed
 from .withdrawal import AnswerWithdrawal
-from .yielding import OppositionWindow, mode_churn, near_object, user_opposes
+from .yielding import (
+    ModeSwitches,
+    OppositionWindow,
+    mode_churn,
+    near_object,
+    user_opposes,
+)
 
 
 class Controller:
@@ -66,8 +71,7 @@ class Controller:
         self._axes = np.zeros(3)
         self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
         self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
-        self._switches: deque[float] = deque()  # when the mode changed, s (blend.churn_window_s)
-        self._switch_mode = Mode.TRANSLATION  # the mode as of the last tick
+        self._switches = ModeSwitches()  # the user's mode switches (blend.churn_window_s)
         self._withdrawal = AnswerWithdrawal(cfg)  # asking.withdraw_yes_s, asking.withdraw_no_s
         self._answer_time = AnswerTime(cfg)  # this person's answer times, across tasks
         self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
@@ -367,7 +371,6 @@ class Controller:
         self._gripper_closed = False
         self._opposition.clear()
         self._switches.clear()
-        self._switch_mode = Mode.TRANSLATION
         self._withdrawal.reset()
         self._yield = None
         self._safety.restart()
@@ -471,7 +474,8 @@ class Controller:
             self.drop_plan()
 
     def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
-        """The paper's future work (section VI-E.4, VII), all off by default: see :attr:`yielding`."""
+        """The paper's future work (section VI-E.4, VII), off by default but the yield to mode churn: see
+        :attr:`yielding`."""
         b = self._cfg.blend
         if b.opposition_window_s > 0.0:
             if has_input:
@@ -479,9 +483,7 @@ class Controller:
             if reason := user_opposes(self._opposition, t, b.opposition_share):
                 return reason
         if b.churn_window_s > 0.0:
-            if self._mode is not self._switch_mode:
-                self._switch_mode = self._mode
-                self._switches.append(t)
+            self._switches.see(t, self._mode)
             if reason := mode_churn(self._switches, t, b.churn_window_s, b.churn_switches):
                 return reason
         if b.yield_near_m > 0.0:

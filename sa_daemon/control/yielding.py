@@ -1,9 +1,10 @@
-"""When the robot yields: the paper's future work (section VI-E.4, VII), all off by default.
+"""When the robot yields: the paper's future work (section VI-E.4, VII); off by default but the yield to
+mode churn (session 49).
 
 Three free functions of the controller's state, each returning the reason the robot should not assist
-now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; and :class:`OppositionWindow`, the short
-history of the user's opposition the first one reads. The controller turns moves and HO into
-no-assistance while any gives a reason.
+now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; and the short histories two of them read,
+:class:`OppositionWindow` (the user's opposition) and :class:`ModeSwitches` (the user's mode switches).
+The controller turns moves and HO into no-assistance while any gives a reason.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections import deque
 import numpy as np
 
 from ..geometry import Pose
+from ..model.actions import Mode
 from ..world.goals import object_probabilities
 from ..world.goalset import GoalSet
 
@@ -46,6 +48,32 @@ class OppositionWindow:
         self._periods.clear()
 
 
+class ModeSwitches:
+    """When the user switched joystick mode: the controller shows it the mode at every tick and it notes
+    each change, keeping those within the window it is last asked about (the window is the caller's, so a
+    person's new settings take effect on the history so far)."""
+
+    def __init__(self) -> None:
+        self._mode = Mode.TRANSLATION  # the mode it was last shown; a task starts in translation
+        self._times: deque[float] = deque()  # when the mode changed, s, oldest first
+
+    def see(self, t: float, mode: Mode) -> None:
+        """The user's mode at ``t`` (s): a change from the last one shown is a switch."""
+        if mode is not self._mode:
+            self._mode = mode
+            self._times.append(t)
+
+    def count(self, t: float, window_s: float) -> int:
+        """The switches over the ``window_s`` seconds ending at ``t`` (s); older ones are forgotten."""
+        while self._times and self._times[0] < t - window_s:
+            self._times.popleft()
+        return len(self._times)
+
+    def clear(self) -> None:
+        self._mode = Mode.TRANSLATION
+        self._times.clear()
+
+
 def user_opposes(window: OppositionWindow, t: float, share: float) -> str | None:
     """``"user_opposes"`` when at least ``share`` of the periods with input over the window (spanning at
     least half of it) opposed the assistance: the user wants a pose of their own."""
@@ -53,14 +81,12 @@ def user_opposes(window: OppositionWindow, t: float, share: float) -> str | None
     return "user_opposes" if span >= 0.5 * window.window_s and opposed >= share * n else None
 
 
-def mode_churn(switch_times: deque[float], t: float, window_s: float, switches: int) -> str | None:
+def mode_churn(history: ModeSwitches, t: float, window_s: float, switches: int) -> str | None:
     """``"mode_churn"`` when the user has switched joystick mode at least ``switches`` times over the last
     ``window_s`` seconds before ``t`` (s): turning, switching to translate, switching back to turn again,
     while the assistance undoes in the mode they left what they did in it (a grasp pose of their own;
-    ``docs/model.md``, session 49). ``switch_times`` (s, oldest first) is pruned to the window."""
-    while switch_times and switch_times[0] < t - window_s:
-        switch_times.popleft()
-    return "mode_churn" if len(switch_times) >= switches else None
+    ``docs/model.md``, session 49)."""
+    return "mode_churn" if history.count(t, window_s) >= switches else None
 
 
 def near_object(goals: GoalSet, probs: np.ndarray, pose: Pose, distance_m: float, belief_share: float) -> str | None:
