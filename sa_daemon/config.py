@@ -206,6 +206,12 @@ class BlendConfig(_Section):
         "they left, a grasp pose of their own (the default since session 49, docs/model.md); 0 = never (the paper)",
     )
     churn_switches: int = Field(6, ge=2, le=100, description="the mode switches within churn_window_s that make the robot yield")
+    churn_counts: Literal["switches", "driven"] = Field(
+        "switches",
+        description="which mode switches churn_switches counts: 'switches' every one (session 49); 'driven' a "
+        "change of the mode the user gives input in, so a switch out and back without input (a glance at the "
+        "other mode) counts none (session 50, docs/model.md)",
+    )
 
 
 class RewardConfig(_Section):

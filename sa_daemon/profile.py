@@ -33,7 +33,7 @@ PROFILE_KEYS: dict[str, frozenset[str]] = {
                            "button_other"}),
     "input": frozenset({"filter_hz"}),
     "blend": frozenset({"alpha", "yield_near_m", "yield_near_belief", "opposition_window_s", "opposition_share",
-                        "churn_window_s", "churn_switches"}),
+                        "churn_window_s", "churn_switches", "churn_counts"}),
     "planner": frozenset({"switch_margin"}),
     # The approach corridor suits a person who closes at the grasp, not one who closes early
     # (docs/results.md, "Session 48"): it is theirs to switch on.

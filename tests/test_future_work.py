@@ -124,6 +124,38 @@ def test_mode_churn_is_on_by_default_off_at_a_zero_window_and_its_settings_are_c
         config_from_dict({"blend": {"churn_window_s": -1.0}})
 
 
+def _glances(ctl: Controller, n: int, t: float = 0.0):
+    """``n`` glances at the other mode, 2 s apart: switch, 0.3 s without input, switch back, push 1.7 s."""
+    tick = None
+    for _ in range(n):
+        ctl.toggle_mode()
+        tick, t = _run(ctl, SCENE.start, [0.0, 0.0, 0.0], 0.3, t0=t)
+        ctl.toggle_mode()
+        tick, t = _run(ctl, SCENE.start, PUSH, 1.7, t0=t)
+    return tick, t
+
+
+def test_counting_the_modes_driven_in_a_glance_at_the_other_mode_is_no_churn():
+    every = _ctl(churn_counts="switches")
+    tick, _ = _glances(every, 5)  # ten switches in 10 s
+    assert every.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
+    driven = _ctl(churn_counts="driven")
+    tick, t = _glances(driven, 5)  # no input in the other mode: the mode driven in never changed
+    assert driven.yielding is None and np.any(tick.command.robot_twist)
+    tick, t = _run(driven, SCENE.start, PUSH, 6.5, t0=t, switch_every_s=1.0)  # driving in each: six changes
+    assert driven.yielding == "mode_churn" and not np.any(tick.command.robot_twist)
+    with pytest.raises(Exception, match="churn_counts"):
+        config_from_dict({"blend": {"churn_counts": "glances"}})
+
+
+def test_a_person_switched_to_counting_the_modes_driven_in_is_counted_so_from_then_on():
+    ctl = _ctl(churn_counts="switches")
+    _glances(ctl, 2)
+    ctl.reconfigure(config_from_dict({"blend": {"churn_counts": "driven"}}))
+    tick, _ = _glances(ctl, 5, t=4.0)
+    assert ctl.yielding is None and np.any(tick.command.robot_twist)
+
+
 def test_the_livelock_of_a_pose_on_no_list_ends_when_the_robot_yields_to_the_switching():
     """End to end (session 49): Table I's `cup:top` with HO for the user whose grasp is on no list. By
     default the assistance turns the gripper back toward a listed pose while the user translates and
@@ -142,10 +174,29 @@ def test_the_livelock_of_a_pose_on_no_list_ends_when_the_robot_yields_to_the_swi
     assert freed.success and freed.mode_changes <= 12 and freed.completion_time_s < 60.0
 
 
+def test_counting_the_modes_driven_in_misses_the_livelock_whose_half_visits_are_glances():
+    """Session 50: the simple study's cup with HO for the off-list user, seed 2002. Every other translation
+    visit of the livelock is 0.5 s without input (the robot turns the gripper away while the switch takes
+    its time, and the user switches straight back), so counting only the modes driven in never reaches
+    six switches in 10 s and the trial times out; counting every switch, the user finishes alone."""
+    from sa_daemon.sim.episode import run_trial
+    from sa_daemon.sim.users import load_user
+
+    prof = load_user("own-pose-off-list")
+    scene = load_scene("study-simple")
+    runs = {}
+    for counts in ("switches", "driven"):
+        cfg = prof.apply(config_from_dict({"blend": {"churn_counts": counts}}))
+        runs[counts] = run_trial(scene, "cup:top", "ho", 2002, cfg, user_name=prof.name)
+    assert runs["switches"].success and runs["switches"].mode_changes <= 12
+    assert not runs["driven"].success and runs["driven"].mode_changes >= 40
+
+
 def test_the_switches_default_to_the_papers_behaviour_but_mode_churn():
     b = config_from_dict({}).blend
     assert b.yield_near_m == 0.0 and b.opposition_window_s == 0.0
     assert (b.churn_window_s, b.churn_switches) == (10.0, 6)  # session 49: docs/results.md
+    assert b.churn_counts == "switches"  # the modes driven in alone miss the livelock (session 50)
     with pytest.raises(Exception, match="yield_near_belief"):
         config_from_dict({"blend": {"yield_near_belief": 0.3}})
 

@@ -50,8 +50,10 @@ def test_a_profile_sets_only_its_keys_and_round_trips_through_toml(tmp_path):
     # A person who wants to fine-tune alone (section VI-E.4): the yield switches are theirs to set.
     fine = parse_profile({"name": "sam", "blend": {"yield_near_m": 0.05, "opposition_window_s": 1.0}}, "sam.toml")
     assert (fine.apply(Config()).blend.yield_near_m, fine.apply(Config()).blend.opposition_window_s) == (0.05, 1.0)
-    churn = parse_profile({"name": "lee", "blend": {"churn_window_s": 8.0, "churn_switches": 4}}, "lee.toml")
-    assert (churn.apply(Config()).blend.churn_window_s, churn.apply(Config()).blend.churn_switches) == (8.0, 4)
+    churn = parse_profile({"name": "lee", "blend": {"churn_window_s": 8.0, "churn_switches": 4,
+                                                   "churn_counts": "driven"}}, "lee.toml")
+    b = churn.apply(Config()).blend
+    assert (b.churn_window_s, b.churn_switches, b.churn_counts) == (8.0, 4, "driven")
     with pytest.raises(ConfigError, match="churn_switches"):
         parse_profile({"name": "lee", "blend": {"churn_switches": 1}}, "lee.toml").apply(Config())
     steady = parse_profile({"name": "ana", "planner": {"switch_margin": 50.0}}, "ana.toml").apply(Config())

@@ -38,7 +38,7 @@ BEFORE_THE_KEY = {
     "reward": {"question_time_s": 0.0},
     "limits": {"tcp_mps": 1.0},
     "asking": {"withdraw_no_s": 0.0, "withdraw_yes_s": 0.0, "learn_answer_time": False},
-    "blend": {"churn_window_s": 0.0},
+    "blend": {"churn_window_s": 0.0, "churn_counts": "switches"},
 }
 """Keys whose default changed after files were recorded without them: a file that lacks one ran with the
 behaviour it had before the key existed (session 9 made the watch model, the path step cost and the

@@ -30,22 +30,15 @@ from ..model.actions import NO_ASSIST, Action, ActionKind, Mode
 from ..model.belief import Belief
 from ..model.methods import method_spec
 from ..model.model import Command, SharedAutonomyModel
-from ..model.twists import axes_to_twist
 from ..planner.snapshot import PlanResult, Snapshot
 from ..world.goalset import GoalSet
 from .answer_time import AnswerTime
-from .lowpass import LowPass
 from .outputs import IDLE_TICK, ZERO6, NoQuestion, Plan, Question, Tick
 from .safety import SafetyPipeline
+from .stick import Stick
 from .user_speed import UserSpeed
 from .withdrawal import AnswerWithdrawal
-from .yielding import (
-    ModeSwitches,
-    OppositionWindow,
-    mode_churn,
-    near_object,
-    user_opposes,
-)
+from .yielding import Yielding
 
 
 class Controller:
@@ -67,17 +60,10 @@ class Controller:
         self._question: Question | None = None
         self._questions = 0
         self._asked: set[str] = set()
-        self._mode = Mode.TRANSLATION
-        self._axes = np.zeros(3)
-        self._smooth = LowPass(cfg.input.filter_hz)  # the tremor filter (input.filter_hz; 0 = none)
-        self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
-        self._switches = ModeSwitches()  # the user's mode switches (blend.churn_window_s)
+        self._stick = Stick(cfg.input)  # axes, mode, freshness, the tremor filter
+        self._yielding = Yielding(cfg.blend)  # why the robot does not assist now (blend.*), or None
         self._withdrawal = AnswerWithdrawal(cfg)  # asking.withdraw_yes_s, asking.withdraw_no_s
         self._answer_time = AnswerTime(cfg)  # this person's answer times, across tasks
-        self._yield: str | None = None  # why the robot does not assist now (blend.yield_*), or None
-        self._axes_out = np.zeros(3)  # the axes after it, as of the last tick (used when it is on)
-        self._t_input = -math.inf
-        self._input_seq = 0
         pc = cfg.planner
         self._speed = UserSpeed(pc.user_speed_tau_s, pc.user_speed_idle, pc.user_speed_unused,
                                 (cfg.input.linear_scale_mps, cfg.input.angular_scale_radps))
@@ -122,22 +108,23 @@ class Controller:
 
     @property
     def mode(self) -> Mode:
-        return self._mode
+        """The joystick's mode."""
+        return self._stick.mode
 
     @property
     def axes(self) -> FloatArray:
         """The last joystick sample, normalised to [-1, 1]."""
-        return self._axes.copy()
+        return self._stick.axes
 
     @property
     def t_input(self) -> float:
         """When the last input sample arrived (s; ``-inf``: none, or the input was lost)."""
-        return self._t_input
+        return self._stick.t_input
 
     @property
     def input_seq(self) -> int:
         """Counts the input samples taken."""
-        return self._input_seq
+        return self._stick.seq
 
     @property
     def assist(self) -> bool:
@@ -169,9 +156,9 @@ class Controller:
 
     @property
     def user_twist(self) -> FloatArray:
-        """The user's twist (m/s, rad/s) of the last sample in the current mode."""
-        axes = self._axes_out if self._smooth.tau_s > 0.0 else self._axes  # after the tremor filter, if any
-        return axes_to_twist(axes, self._mode, self._cfg.input)
+        """The user's twist (m/s, rad/s) of the last sample in the current mode, after the tremor filter if
+        any."""
+        return self._stick.twist
 
     @property
     def user_speed(self) -> tuple[float, float]:
@@ -182,43 +169,32 @@ class Controller:
 
     def input_fresh(self, t: float) -> bool:
         """An input sample arrived within ``safety.stale_command_s`` of ``t``."""
-        return t - self._t_input <= self._cfg.safety.stale_command_s
+        return self._stick.fresh(t, self._cfg.safety.stale_command_s)
 
     # -- input -------------------------------------------------------------------------------------------
 
     def on_input(self, axes: FloatArray, t: float) -> bool:
         """A joystick sample at ``t``; ``False`` (and nothing changes) unless it is 3 finite numbers.
         Axes are clipped to [-1, 1]."""
-        a = np.asarray(axes, dtype=float)
-        if a.shape != (3,) or not np.all(np.isfinite(a)):
-            return False
-        self._axes = np.clip(a, -1.0, 1.0)
-        self._t_input = t
-        self._input_seq += 1
-        return True
+        return self._stick.sample(axes, t)
 
     def hold_input(self, t: float) -> None:
         """The input device reports changes only and is connected: its held axes are current at ``t``."""
-        self._t_input = t
+        self._stick.hold(t)
 
     def lose_input(self) -> None:
         """The input device is gone: axes zero and stale at once, so the next tick commands zero (the
         pipeline's stale stage) instead of waiting for ``stale_command_s``."""
-        self._axes = np.zeros(3)
-        self._axes_out = np.zeros(3)
-        self._smooth.reset()  # zero at once, no glide
-        self._t_input = -math.inf
+        self._stick.lose()
 
     def set_mode(self, mode: Mode) -> bool:
         """Switch the joystick mode; ``True`` if it changed."""
-        mode = Mode(mode)
-        changed = mode is not self._mode
-        self._mode = mode
-        return changed
+        return self._stick.set_mode(mode)
 
     def toggle_mode(self) -> Mode:
-        self.set_mode(Mode.ROTATION if self._mode is Mode.TRANSLATION else Mode.TRANSLATION)
-        return self._mode
+        """Switch to the other joystick mode; returns it."""
+        self.set_mode(Mode.ROTATION if self.mode is Mode.TRANSLATION else Mode.TRANSLATION)
+        return self.mode
 
     def set_assist(self, on: bool) -> None:
         """Assistance on or off (off: the user's twist alone, still filtered)."""
@@ -246,7 +222,7 @@ class Controller:
             return False
         u = self.user_twist
         self._belief = self._model.update_input(self._belief, pose, u)
-        self._speed.update(u, 0 if self._mode is Mode.TRANSLATION else 1, t)
+        self._speed.update(u, 0 if self.mode is Mode.TRANSLATION else 1, t)
         return True
 
     # -- questions ---------------------------------------------------------------------------------------
@@ -297,7 +273,7 @@ class Controller:
             return None
         b = self._belief
         cap = self._cfg.asking.max_per_task
-        snap = Snapshot(b.goals, self._model.planning_probs(b, pose), pose, self.user_twist, self._mode,
+        snap = Snapshot(b.goals, self._model.planning_probs(b, pose), pose, self.user_twist, self.mode,
                         frozenset(self._asked), self._method, budget_s=budget_s, node_budget=node_budget,
                         user_speed=self.user_speed, questions_left=max(0, cap - len(self._asked)) if cap else None,
                         anchor=b.anchor, pose_log_w=self._model.reach_log_w(b),
@@ -367,12 +343,10 @@ class Controller:
         self._question = None
         self.drop_plan()
         self._speed.reset()
-        self._mode = Mode.TRANSLATION
+        self._stick.set_mode(Mode.TRANSLATION)
         self._gripper_closed = False
-        self._opposition.clear()
-        self._switches.clear()
+        self._yielding.reset()
         self._withdrawal.reset()
-        self._yield = None
         self._safety.restart()
 
     # -- stop --------------------------------------------------------------------------------------------
@@ -404,10 +378,8 @@ class Controller:
         filter, the questions they want); the task, belief and plan go on."""
         self._cfg = cfg
         self._model = SharedAutonomyModel(cfg)
-        self._smooth = LowPass(cfg.input.filter_hz)
-        self._axes_out = np.zeros(3)  # a new filter starts at rest, as at start-up
-        if cfg.blend.opposition_window_s != self._opposition.window_s:
-            self._opposition = OppositionWindow(cfg.blend.opposition_window_s)
+        self._stick.reconfigure(cfg.input)  # a new tremor filter starts at rest
+        self._yielding.reconfigure(cfg.blend)
         self._withdrawal.reconfigure(cfg)
         self._answer_time.reconfigure(cfg)  # another person: their answer times count afresh
 
@@ -421,8 +393,7 @@ class Controller:
         """The command for this control period at the arm's ``state``: the current action's twist blended
         with the user's (zero when the input is stale), then the safety pipeline."""
         fresh = self.input_fresh(t)
-        if self._smooth.tau_s > 0.0:  # the tremor filter runs at the control rate on the held axes
-            self._axes_out = self._smooth.update(self._axes, t)
+        self._stick.filter(t)  # the tremor filter runs at the control rate on the held axes
         u = self.user_twist if fresh else ZERO6.copy()
         action = self._carried_action(t, state.pose)
         error = None
@@ -432,8 +403,8 @@ class Controller:
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             has_input = fresh and bool(np.any(u))
             self._withdraw_answers_if_opposed(t, cmd, has_input)
-            self._yield = self._yield_reason(t, state.pose, cmd, has_input)
-            if self._yield is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
+            yielding = self._yielding.step(t, self.mode, has_input, bool(cmd.opposed), b, state.pose)
+            if yielding is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
                 cmd = self._model.command(NO_ASSIST, b.goals, b.probs, state.pose, u, self._method)
         except (ValueError, FloatingPointError) as e:
             cmd, error = Command(NO_ASSIST, ZERO6.copy(), u, False), str(e)
@@ -452,7 +423,7 @@ class Controller:
         they want a pose of their own) or ``"mode_churn"`` (the person keeps switching mode,
         ``blend.churn_window_s``: the assistance undoes in one mode what they do in the other); ``None``
         otherwise."""
-        return self._yield
+        return self._yielding.reason
 
     @property
     def yes_withdrawn(self) -> int:
@@ -472,23 +443,6 @@ class Controller:
         if (b := self._withdrawal.step(self._belief, t, assisting, bool(cmd.opposed))) is not None:
             self._belief = b
             self.drop_plan()
-
-    def _yield_reason(self, t: float, pose: Pose, cmd: Command, has_input: bool) -> str | None:
-        """The paper's future work (section VI-E.4, VII), off by default but the yield to mode churn: see
-        :attr:`yielding`."""
-        b = self._cfg.blend
-        if b.opposition_window_s > 0.0:
-            if has_input:
-                self._opposition.add(t, bool(cmd.opposed))
-            if reason := user_opposes(self._opposition, t, b.opposition_share):
-                return reason
-        if b.churn_window_s > 0.0:
-            self._switches.see(t, self._mode)
-            if reason := mode_churn(self._switches, t, b.churn_window_s, b.churn_switches):
-                return reason
-        if b.yield_near_m > 0.0:
-            return near_object(self._belief.goals, self._belief.probs, pose, b.yield_near_m, b.yield_near_belief)
-        return None
 
     def _carried_action(self, t: float, pose: Pose) -> Action:
         """:meth:`current_action`, its goal index carried over to the belief's goal set when resampling

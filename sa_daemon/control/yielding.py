@@ -2,9 +2,10 @@
 mode churn (session 49).
 
 Three free functions of the controller's state, each returning the reason the robot should not assist
-now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; and the short histories two of them read,
-:class:`OppositionWindow` (the user's opposition) and :class:`ModeSwitches` (the user's mode switches).
-The controller turns moves and HO into no-assistance while any gives a reason.
+now (a ``yielding`` status, ``docs/protocol.md``) or ``None``; the short histories two of them read,
+:class:`OppositionWindow` (the user's opposition) and :class:`ModeSwitches` (the user's mode switches);
+and :class:`Yielding`, which keeps the histories and asks the rules in order at every control period.
+The controller turns moves and HO into no-assistance while it gives a reason.
 """
 
 from __future__ import annotations
@@ -13,8 +14,10 @@ from collections import deque
 
 import numpy as np
 
+from ..config import BlendConfig
 from ..geometry import Pose
 from ..model.actions import Mode
+from ..model.belief import Belief
 from ..world.goals import object_probabilities
 from ..world.goalset import GoalSet
 
@@ -51,15 +54,26 @@ class OppositionWindow:
 class ModeSwitches:
     """When the user switched joystick mode: the controller shows it the mode at every tick and it notes
     each change, keeping those within the window it is last asked about (the window is the caller's, so a
-    person's new settings take effect on the history so far)."""
+    person's new settings take effect on the history so far).
 
-    def __init__(self) -> None:
-        self._mode = Mode.TRANSLATION  # the mode it was last shown; a task starts in translation
+    With ``driven`` it notes a change of the mode the user *drives* in instead: a switch counts at the
+    first input given in the new mode, and a switch out and back without input between (a glance at the
+    other mode) counts nothing (``blend.churn_counts = "driven"``)."""
+
+    def __init__(self, driven: bool = False) -> None:
+        self._driven = driven
+        self._mode = Mode.TRANSLATION  # the mode last counted in; a task starts in translation
         self._times: deque[float] = deque()  # when the mode changed, s, oldest first
 
-    def see(self, t: float, mode: Mode) -> None:
-        """The user's mode at ``t`` (s): a change from the last one shown is a switch."""
-        if mode is not self._mode:
+    @property
+    def driven(self) -> bool:
+        """Whether only changes of the mode driven in count."""
+        return self._driven
+
+    def see(self, t: float, mode: Mode, driving: bool = True) -> None:
+        """The user's mode at ``t`` (s), and whether they give input in it (``driving``): a change from the
+        mode last counted in is a switch (with ``driven``, once they drive in it)."""
+        if mode is not self._mode and (driving or not self._driven):
             self._mode = mode
             self._times.append(t)
 
@@ -98,3 +112,57 @@ def near_object(goals: GoalSet, probs: np.ndarray, pose: Pose, distance_m: float
         return None
     nearest = min(float(np.linalg.norm(p.position - pose.position)) for g in goals.goals if g.object == obj for p in g.poses)
     return "near_object" if nearest <= distance_m else None
+
+
+class Yielding:
+    """The yield rules with the histories they read, settings ``blend`` (``blend.opposition_window_s``,
+    ``blend.churn_window_s``, ``blend.yield_near_m``; each off at 0). One per controller; a new task starts
+    it afresh (:meth:`reset`)."""
+
+    def __init__(self, cfg: BlendConfig) -> None:
+        self._cfg = cfg
+        self._opposition = OppositionWindow(cfg.opposition_window_s)
+        self._switches = ModeSwitches(cfg.churn_counts == "driven")
+        self._reason: str | None = None
+
+    @property
+    def reason(self) -> str | None:
+        """Why the robot yields as of the last :meth:`step` (``"user_opposes"``, ``"mode_churn"``,
+        ``"near_object"``), or ``None``."""
+        return self._reason
+
+    def step(self, t: float, mode: Mode, has_input: bool, opposed: bool, belief: Belief, pose: Pose) -> str | None:
+        """One control period at ``t`` (s): the user's joystick ``mode``, whether they gave input and whether
+        it ``opposed`` the assistance (the reward's test), the belief and the TCP ``pose``. Returns (and
+        keeps as :attr:`reason`) the first rule's reason, in the order opposition, churn, nearness."""
+        self._reason = self._ask(t, mode, has_input, opposed, belief, pose)
+        return self._reason
+
+    def _ask(self, t: float, mode: Mode, has_input: bool, opposed: bool, belief: Belief, pose: Pose) -> str | None:
+        c = self._cfg
+        if c.opposition_window_s > 0.0:
+            if has_input:
+                self._opposition.add(t, opposed)
+            if reason := user_opposes(self._opposition, t, c.opposition_share):
+                return reason
+        if c.churn_window_s > 0.0:
+            self._switches.see(t, mode, has_input)
+            if reason := mode_churn(self._switches, t, c.churn_window_s, c.churn_switches):
+                return reason
+        if c.yield_near_m > 0.0:
+            return near_object(belief.goals, belief.probs, pose, c.yield_near_m, c.yield_near_belief)
+        return None
+
+    def reconfigure(self, cfg: BlendConfig) -> None:
+        """A person's new settings; a history whose window or count changed starts empty."""
+        self._cfg = cfg
+        if cfg.opposition_window_s != self._opposition.window_s:
+            self._opposition = OppositionWindow(cfg.opposition_window_s)
+        if (cfg.churn_counts == "driven") != self._switches.driven:
+            self._switches = ModeSwitches(cfg.churn_counts == "driven")
+
+    def reset(self) -> None:
+        """A new task: no history, no reason."""
+        self._opposition.clear()
+        self._switches.clear()
+        self._reason = None
