@@ -192,6 +192,29 @@ def test_counting_the_modes_driven_in_misses_the_livelock_whose_half_visits_are_
     assert not runs["driven"].success and runs["driven"].mode_changes >= 40
 
 
+def test_the_yield_rules_are_asked_in_order_and_a_new_task_or_setting_starts_them_afresh():
+    from sa_daemon.control.yielding import Yielding
+    from sa_daemon.model.actions import Mode
+
+    cfg = config_from_dict({"blend": {"opposition_window_s": 1.0, "churn_window_s": 10.0}}).blend
+    ctl = _ctl()
+    y = Yielding(cfg)
+    b, pose = ctl.belief, SCENE.start
+    modes = [Mode.ROTATION, Mode.TRANSLATION] * 3
+    t = 0.0
+    for mode in modes:  # six switches, each period with input opposing: both rules would yield
+        for _ in range(20):
+            y.step(t, mode, True, True, b, pose)
+            t += 0.05
+    assert y.reason == "user_opposes"  # the opposition rule is asked first
+    y.reconfigure(config_from_dict({"blend": {"opposition_window_s": 2.0, "churn_window_s": 10.0}}).blend)
+    # the new opposition window starts empty; the switches seen while it yielded still count
+    assert y.step(t, Mode.TRANSLATION, True, False, b, pose) == "mode_churn"
+    y.reset()
+    assert y.reason is None
+    assert y.step(t + 0.05, Mode.TRANSLATION, True, False, b, pose) is None  # the switches are forgotten
+
+
 def test_the_switches_default_to_the_papers_behaviour_but_mode_churn():
     b = config_from_dict({}).blend
     assert b.yield_near_m == 0.0 and b.opposition_window_s == 0.0

@@ -140,15 +140,14 @@ class Yielding:
 
     def _ask(self, t: float, mode: Mode, has_input: bool, opposed: bool, belief: Belief, pose: Pose) -> str | None:
         c = self._cfg
-        if c.opposition_window_s > 0.0:
-            if has_input:
-                self._opposition.add(t, opposed)
-            if reason := user_opposes(self._opposition, t, c.opposition_share):
-                return reason
+        if c.opposition_window_s > 0.0 and has_input:  # both histories see every period, whichever rule yields
+            self._opposition.add(t, opposed)
         if c.churn_window_s > 0.0:
             self._switches.see(t, mode, has_input)
-            if reason := mode_churn(self._switches, t, c.churn_window_s, c.churn_switches):
-                return reason
+        if c.opposition_window_s > 0.0 and (reason := user_opposes(self._opposition, t, c.opposition_share)):
+            return reason
+        if c.churn_window_s > 0.0 and (reason := mode_churn(self._switches, t, c.churn_window_s, c.churn_switches)):
+            return reason
         if c.yield_near_m > 0.0:
             return near_object(belief.goals, belief.probs, pose, c.yield_near_m, c.yield_near_belief)
         return None
