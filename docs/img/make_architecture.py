@@ -77,7 +77,7 @@ def draw(path: Path) -> None:
     ax.set_xlim(0, 12.9)
     ax.set_ylim(0.2, 7.0)
     ax.axis("off")
-    for name, (x, y, w, h, colour, text) in BOXES.items():
+    for x, y, w, h, colour, text in BOXES.values():
         ax.add_patch(FancyBboxPatch((x - w / 2, y - h / 2), w, h, boxstyle="round,pad=0.04",
                                     fc=colour, ec="#444444", lw=1.2))
         title, rest = text.split("\n", 1)

@@ -41,7 +41,7 @@ def _draw_objects(top: plt.Axes, side: plt.Axes, scene: Scene) -> None:
     """Objects in grey. Top view: horizontal axis is -y (left of the robot on the left), vertical is x."""
     for obj in scene.objects:
         x, y, z = obj.position
-        style = dict(facecolor="0.85", edgecolor="0.35", lw=0.8, zorder=1)
+        style = {"facecolor": "0.85", "edgecolor": "0.35", "lw": 0.8, "zorder": 1}
         if obj.shape == "box":
             fp = _footprint(obj)
             top.add_patch(Polygon(np.column_stack((-fp[:, 1], fp[:, 0])), **style))
@@ -63,11 +63,13 @@ def _draw_pose(top: plt.Axes, side: plt.Axes, pose: Pose, color: str, lw: float 
     p, y, z = pose.position, rot[:, 1], rot[:, 2]
     tail = p - ARROW_M * z
     for ax, (i, si), (j, sj) in ((top, (1, -1), (0, 1)), (side, (0, 1), (2, 1))):
-        u = lambda v: (si * v[i], sj * v[j])
+        def u(v, i=i, si=si, j=j, sj=sj):  # the view's two axes, signed
+            return si * v[i], sj * v[j]
+
         (tx, ty), (px, py) = u(tail), u(p)
         if math.hypot(px - tx, py - ty) > 1e-4:
             ax.annotate("", xy=(px, py), xytext=(tx, ty),
-                        arrowprops=dict(arrowstyle="-|>", color=color, lw=lw, mutation_scale=6), zorder=3)
+                        arrowprops={"arrowstyle": "-|>", "color": color, "lw": lw, "mutation_scale": 6}, zorder=3)
         else:  # arrow along the viewing direction: a dot
             ax.plot(px, py, "o", color=color, ms=2.5, zorder=3)
         (ax0, ay0), (ax1, ay1) = u(p - TICK_M * y), u(p + TICK_M * y)
@@ -76,7 +78,7 @@ def _draw_pose(top: plt.Axes, side: plt.Axes, pose: Pose, color: str, lw: float 
 
 def draw_scene(scene: Scene, path: Path) -> None:
     """Top view and side view of ``scene`` with the grasp poses of every goal."""
-    fig, (top, side) = plt.subplots(1, 2, figsize=(13, 5.4), gridspec_kw=dict(width_ratios=[1.1, 1]))
+    fig, (top, side) = plt.subplots(1, 2, figsize=(13, 5.4), gridspec_kw={"width_ratios": [1.1, 1]})
     _draw_objects(top, side, scene)
     colors = plt.get_cmap("tab20" if len(scene.goals) > 10 else "tab10")
     for k, goal in enumerate(scene.goals):
