@@ -403,7 +403,8 @@ class Controller:
             cmd = self._model.command(action, b.goals, b.probs, state.pose, u, self._method, reach)
             has_input = fresh and bool(np.any(u))
             self._withdraw_answers_if_opposed(t, cmd, has_input)
-            yielding = self._yielding.step(t, self.mode, has_input, bool(cmd.opposed), b, state.pose)
+            # (the belief after any withdrawal: near_object reads the one the next plan will)
+            yielding = self._yielding.step(t, self.mode, has_input, bool(cmd.opposed), self._belief, state.pose)
             if yielding is not None and action.kind in (ActionKind.MOVE, ActionKind.HO):
                 cmd = self._model.command(NO_ASSIST, b.goals, b.probs, state.pose, u, self._method)
         except (ValueError, FloatingPointError) as e:
