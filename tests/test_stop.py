@@ -161,3 +161,34 @@ async def test_stop_self_test_then_every_stop_source_latches_within_one_control_
         await asyncio.wait_for(run, 30)
         req.close(linger=0)
         ctx.term()
+
+
+async def test_a_person_who_keeps_switching_mode_is_shown_why_the_robot_holds_back(stick):
+    """The yield to mode churn (``blend.churn_window_s``) through the real daemon: the evdev stick pushed
+    and its mode button pressed six times within 10 s; the state's ``yielding`` and ``sa-daemon monitor``
+    say why the assistance is held back, and a new task clears it."""
+    cfg = config_from_dict({
+        "method": "ho", "arm": {"backend": "kinematic"}, "speech": {"enabled": False},
+        "zmq": {"pub": f"tcp://127.0.0.1:{free_port()}", "cmd": f"tcp://127.0.0.1:{free_port()}"},
+        "joystick": {"poll_s": 0.05},
+    })
+    d = build_daemon(cfg, Launch(input="evdev", duration_s=60, progress=False))
+    run = asyncio.create_task(d.run())
+    try:
+        await _until(lambda: d._ready_sent and d.input_connected, what="daemon ready with the joystick")
+        await stick.queue.put(absev(ecodes.ABS_X, 255))
+        for press in range(6):
+            await asyncio.sleep(0.3)
+            assert d.ctl.yielding is None, f"held back after {press} switches"
+            await stick.queue.put(key(ecodes.BTN_TRIGGER, 1))
+            await stick.queue.put(key(ecodes.BTN_TRIGGER, 0))
+        await _until(lambda: d.ctl.yielding == "mode_churn", timeout_s=5, what="held back after six switches")
+        state = state_message(d.view)
+        assert state["yielding"] == "mode_churn" and state["action"]["kind"] == "ho"
+        assert "(held back: mode_churn)" in render(state, deque())
+        d.ctl.reset()
+        assert d.ctl.yielding is None
+        assert "held back" not in render(state_message(d.view), deque())
+    finally:
+        d.request_stop("test over")
+        await asyncio.wait_for(run, 30)

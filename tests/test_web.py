@@ -410,6 +410,24 @@ def test_in_chromium_the_keyboard_works_too(live, browser):
     c.event("resume", timeout_s=10, start=i)
 
 
+def test_in_chromium_the_page_says_in_words_why_the_robot_holds_back(live, browser):
+    """The state's ``yielding`` (docs/protocol.md) drawn by the page: the live daemon's last state, and the
+    same state with each reason the controller gives (set in the page, drawn by its own render)."""
+    from selenium.webdriver.common.by import By
+
+    _, w = live
+    browser.get(w.url + "/")
+    until(lambda: browser.execute_script("return window.saRendered || 0") > 3, what="states drawn")
+    assert "held back" not in browser.find_element(By.ID, "action").text  # the simulated user does not churn
+    drawn = {reason: browser.execute_script(
+        "render({...last, yielding: arguments[0]}); return document.getElementById('action').textContent", reason)
+        for reason in ("mode_churn", "user_opposes", "near_object", "a_future_reason")}
+    assert drawn["mode_churn"].endswith(", held back: you keep switching mode")
+    assert drawn["user_opposes"].endswith(", held back: you keep pushing against it")
+    assert drawn["near_object"].endswith(", held back: near the object, you finish the grasp")
+    assert drawn["a_future_reason"].endswith(", held back: a_future_reason")  # an unknown reason as sent
+
+
 def test_in_chromium_a_bad_token_gets_nothing_and_the_right_one_the_live_page(live, browser, tmp_path):
     d, _ = live
     token = "t" * 43

@@ -35,7 +35,8 @@ def render(state: dict[str, Any], events: deque[str]) -> str:
     a = state["action"]
     lines += [
         "",
-        f"action:   {a['kind']}{' ' + a['goal'] if 'goal' in a else ''}",
+        f"action:   {a['kind']}{' ' + a['goal'] if 'goal' in a else ''}"
+        + (f"  (held back: {state['yielding']})" if state.get("yielding") else ""),
         f"question: {state['question'] or '-'}",
         f"user:     {_vec(state['user_twist'])}",
         f"robot:    {_vec(state['robot_twist'])}",

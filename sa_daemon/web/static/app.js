@@ -5,6 +5,9 @@
 const METHODS = ["manual", "ho", "ho+noassist", "blend", "policy", "policy+noqns", "policy+withoutnoassist",
                  "policy+noho"];
 const $ = (id) => document.getElementById(id);
+// Why the robot holds its assistance back although its plan would assist (the state's `yielding`).
+const HELD_BACK = {near_object: "near the object, you finish the grasp", user_opposes: "you keep pushing against it",
+                   mode_churn: "you keep switching mode"};
 let ws = null;
 let scene = null;
 let last = null;           // the last state message
@@ -55,7 +58,8 @@ function render(s) {
   const q = s.question;
   $("question").textContent = q ? q : "No question";
   $("yes").disabled = $("no").disabled = $("other").disabled = !q;
-  $("action").textContent = s.action.kind + (s.action.goal ? ` ${s.action.goal}` : "");
+  $("action").textContent = s.action.kind + (s.action.goal ? ` ${s.action.goal}` : "")
+    + (s.yielding ? `, held back: ${HELD_BACK[s.yielding] || s.yielding}` : "");
   $("mode").textContent = s.mode;
   $("assist").textContent = (s.assist ? "on" : "off") + `, ${s.method}`;
   const pl = s.planner;
