@@ -65,12 +65,7 @@ class ModeSwitches:
         self._mode = Mode.TRANSLATION  # the mode last counted in; a task starts in translation
         self._times: deque[float] = deque()  # when the mode changed, s, oldest first
 
-    @property
-    def driven(self) -> bool:
-        """Whether only changes of the mode driven in count."""
-        return self._driven
-
-    def see(self, t: float, mode: Mode, driving: bool = True) -> None:
+    def see(self, t: float, mode: Mode, driving: bool) -> None:
         """The user's mode at ``t`` (s), and whether they give input in it (``driving``): a change from the
         mode last counted in is a switch (with ``driven``, once they drive in it)."""
         if mode is not self._mode and (driving or not self._driven):
@@ -140,25 +135,28 @@ class Yielding:
 
     def _ask(self, t: float, mode: Mode, has_input: bool, opposed: bool, belief: Belief, pose: Pose) -> str | None:
         c = self._cfg
-        if c.opposition_window_s > 0.0 and has_input:  # both histories see every period, whichever rule yields
-            self._opposition.add(t, opposed)
+        opposes = churns = None  # both histories see every period, whichever rule yields
+        if c.opposition_window_s > 0.0:
+            if has_input:
+                self._opposition.add(t, opposed)
+            opposes = user_opposes(self._opposition, t, c.opposition_share)
         if c.churn_window_s > 0.0:
             self._switches.see(t, mode, has_input)
-        if c.opposition_window_s > 0.0 and (reason := user_opposes(self._opposition, t, c.opposition_share)):
-            return reason
-        if c.churn_window_s > 0.0 and (reason := mode_churn(self._switches, t, c.churn_window_s, c.churn_switches)):
-            return reason
+            churns = mode_churn(self._switches, t, c.churn_window_s, c.churn_switches)
+        if opposes or churns:
+            return opposes or churns
         if c.yield_near_m > 0.0:
             return near_object(belief.goals, belief.probs, pose, c.yield_near_m, c.yield_near_belief)
         return None
 
     def reconfigure(self, cfg: BlendConfig) -> None:
-        """A person's new settings; a history whose window or count changed starts empty."""
-        self._cfg = cfg
+        """A person's new settings; the opposition history starts empty if its window changed, the switches'
+        if what they count did."""
         if cfg.opposition_window_s != self._opposition.window_s:
             self._opposition = OppositionWindow(cfg.opposition_window_s)
-        if (cfg.churn_counts == "driven") != self._switches.driven:
+        if cfg.churn_counts != self._cfg.churn_counts:
             self._switches = ModeSwitches(cfg.churn_counts == "driven")
+        self._cfg = cfg
 
     def reset(self) -> None:
         """A new task: no history, no reason."""
