@@ -73,6 +73,34 @@ def test_bootstrap_higher_level_gives_a_wider_interval_for_the_same_resamples():
     assert lo99 < lo95 < hi95 < hi99
 
 
+def test_bootstrap_within_strata_leaves_out_the_spread_between_them():
+    # two users, each always the same: only the seeds are resampled, so the mean of the mix cannot move
+    values, users = [0.0, 0.0, 1.0, 1.0], ["a", "a", "b", "b"]
+    assert bootstrap_ci(values, strata=users) == (0.5, 0.5)
+    lo, hi = bootstrap_ci(values)
+    assert lo < 0.5 < hi
+
+
+def test_bootstrap_within_one_stratum_draws_as_without_strata():
+    x = np.random.default_rng(5).normal(1.0, 1.0, 20)
+    assert bootstrap_ci(x, seed=2, strata=["all"] * 20) == bootstrap_ci(x, seed=2)
+
+
+def test_bootstrap_within_strata_is_narrower_where_the_strata_differ():
+    rng = np.random.default_rng(6)
+    x = np.concatenate([rng.normal(0.0, 0.3, 20), rng.normal(3.0, 0.3, 20)])
+    users = ["calm"] * 20 + ["hasty"] * 20
+    lo_s, hi_s = bootstrap_ci(x, strata=users)
+    lo, hi = bootstrap_ci(x)
+    assert lo_s < x.mean() < hi_s
+    assert hi_s - lo_s < 0.5 * (hi - lo)
+
+
+def test_bootstrap_strata_must_label_every_value():
+    with pytest.raises(ValueError, match="strata"):
+        bootstrap_ci([1.0, 2.0, 3.0], strata=["a", "b"])
+
+
 def test_bootstrap_of_no_values_is_none():
     assert bootstrap_ci([]) is None
 

@@ -41,6 +41,27 @@ def test_question_band_is_judged_on_the_task_mean(counts, met):
     assert _verdict(targets.question_band(trials), "scene1 `bowl:top`") is None  # no trials: not measured
 
 
+def test_a_band_missed_within_the_interval_is_told_from_one_missed_beyond_it():
+    # one user asked now and then: mean 0.3, but resampled seeds reach 0.4 -> missed at the edge
+    varied = [trial(task="cup:side", seed=s, questions=int(s % 10 < 3)) for s in range(10)]
+    (row,) = [r for r in targets.question_band(varied) if r.where == "scene1 `cup:side`"]
+    assert row.met is False and row.within is True and row.measured.startswith("0.30 [")
+    assert "(within its 95 % interval)" in targets.markdown([row])
+    # two users, one always asked once and one never: every seed alike, so the mean 0.5 cannot move,
+    # and a mean of 0.25 (three users never asked) misses the band whatever the seeds
+    steady = [trial(task="cup:side", user=u, seed=s, questions=int(u == "a")) for u in "abcd" for s in range(5)]
+    (row,) = [r for r in targets.question_band(steady) if r.where == "scene1 `cup:side`"]
+    assert (row.met, row.within, row.measured) == (False, False, "0.25 [0.25, 0.25] (20 trials)")
+    assert "interval" not in targets.markdown([row]).splitlines()[2]
+
+
+def test_a_prediction_rate_carries_its_interval():
+    ts = [trial(scene="scene2", task="cup:top_horizontal", seed=s, correct=s != 0) for s in range(10)]
+    (row,) = targets.prediction(ts)
+    lo, hi = (float(x) for x in row.measured[len("0.90 ["):-1].split(", "))
+    assert row.met is True and row.measured.startswith("0.90 [") and lo < 0.9 <= hi <= 1.0
+
+
 def test_the_easy_task_and_the_22_goals_have_their_own_limits():
     easy = [trial(task="chips can:side", seed=s, questions=q) for s, q in enumerate((0, 0, 0, 1))]
     assert _verdict(targets.question_band(easy), "scene1 `chips can:side`") is False  # 0.25 > 0.2

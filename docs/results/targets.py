@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sa_daemon.sim.evaluate import compare, question_measures, trial_key
+from sa_daemon.sim.stats import bootstrap_ci
 
 POLICY = "policy"
 ALPHA = 0.05
@@ -58,12 +59,15 @@ Key = tuple[str, str]
 @dataclass(frozen=True)
 class Row:
     """One line of the report: the target, where it is measured, the figure, and the verdict (``None``:
-    not measured in the files)."""
+    not measured in the files). ``within`` is, for a row judged on a mean, whether the target is met
+    anywhere in the mean's 95 % interval (:func:`_interval`): a row not met but within it is at the
+    band's edge, one not met and outside it is not a matter of the sample."""
 
     target: str
     where: str
     measured: str
     met: bool | None
+    within: bool | None = None
 
 
 def load_trials(paths: Iterable[Path]) -> list[dict]:
@@ -110,19 +114,34 @@ def _where(key: Key) -> str:
     return f"{key[0]} `{key[1]}`"
 
 
-def _questions(trials: list[dict], key: Key, target: str, within: Callable[[float], bool]) -> Row:
-    """The policy's questions a task on ``key``, judged by ``within``."""
+def _interval(ts: list[dict], value: Callable[[dict], float]) -> tuple[float, float]:
+    """The 95 % bootstrap interval of the mean of ``value`` over ``ts``, the seeds resampled within each
+    user (the population's mix of users is fixed by design; only its seeds are a sample)."""
+    return bootstrap_ci([float(value(t)) for t in ts], strata=[t["user"] for t in ts])
+
+
+def _judged(ts: list[dict], value: Callable[[dict], float], ok: Callable[[float, float], bool]) -> tuple[str, bool, bool]:
+    """The mean of ``value`` over ``ts`` with its interval, as text; whether ``ok`` holds on the mean; and
+    whether it holds anywhere in the interval (``ok(lo, hi)`` is given the interval's ends)."""
+    mean = _mean([float(value(t)) for t in ts])
+    lo, hi = _interval(ts, value)
+    return f"{mean:.2f} [{lo:.2f}, {hi:.2f}]", ok(mean, mean), ok(lo, hi)
+
+
+def _questions(trials: list[dict], key: Key, target: str, ok: Callable[[float, float], bool]) -> Row:
+    """The policy's questions a task on ``key``, judged by ``ok`` (module doc, :func:`_judged`)."""
     ts = _of(trials, key)
-    q = _mean([t["questions"] for t in ts]) if ts else None
-    return Row(target, _where(key), "-" if q is None else f"{q:.2f} ({len(ts)} trials)",
-               None if q is None else within(q))
+    if not ts:
+        return Row(target, _where(key), "-", None)
+    text, met, within = _judged(ts, lambda t: t["questions"], ok)
+    return Row(target, _where(key), f"{text} ({len(ts)} trials)", met, within)
 
 
 def question_band(trials: list[dict]) -> list[Row]:
     """Questions a task in 0.4-1.6 where the paper's asked, at most 0.2 on the easy task."""
-    rows = [_questions(trials, key, "questions a task 0.4-1.6", lambda q: 0.4 <= q <= 1.6)
+    rows = [_questions(trials, key, "questions a task 0.4-1.6", lambda lo, hi: hi >= 0.4 and lo <= 1.6)
             for key in [*SCENE1_ASKING, *_tasks(trials, "study-simple")]]
-    return rows + [_questions(trials, EASY, "questions a task <= 0.2", lambda q: q <= 0.2)]
+    return rows + [_questions(trials, EASY, "questions a task <= 0.2", lambda lo, hi: lo <= 0.2)]
 
 
 def many_goals(trials: list[dict]) -> list[Row]:
@@ -130,10 +149,12 @@ def many_goals(trials: list[dict]) -> list[Row]:
     ts = [t for t in trials if t["scene"] == "study-complex" and t["method"] == POLICY]
     if not ts:
         return [Row("22 goals: questions <= 1.0 a task, no trial above 3", "study-complex", "-", None)]
-    q = _mean([t["questions"] for t in ts])
+    text, mean_ok, mean_within = _judged(ts, lambda t: t["questions"], lambda lo, hi: lo <= 1.0)
     over = sum(t["questions"] > 3 for t in ts)
+    _, _, over_within = _judged(ts, lambda t: t["questions"] > 3, lambda lo, hi: lo == 0.0)
     return [Row("22 goals: questions <= 1.0 a task, no trial above 3", "study-complex",
-                f"{q:.2f} a task; {over} of {len(ts)} trials above 3", q <= 1.0 and over == 0)]
+                f"{text} a task; {over} of {len(ts)} trials above 3", mean_ok and over == 0,
+                mean_within and over_within)]
 
 
 def what_is_asked(trials: list[dict]) -> list[Row]:
@@ -207,8 +228,8 @@ def prediction(trials: list[dict]) -> list[Row]:
     """Correct prediction (the true target above 0.7 at the end) at least 0.9, task by task."""
     rows = []
     for key in _tasks(trials):
-        rate = _mean([t["correct_prediction"] for t in _of(trials, key)])
-        rows.append(Row("correct prediction >= 0.9", _where(key), f"{rate:.2f}", rate >= 0.9))
+        text, met, within = _judged(_of(trials, key), lambda t: t["correct_prediction"], lambda lo, hi: hi >= 0.9)
+        rows.append(Row("correct prediction >= 0.9", _where(key), text, met, within))
     return rows
 
 
@@ -237,10 +258,14 @@ def report(trials: list[dict]) -> list[Row]:
 def markdown(rows: list[Row]) -> str:
     verdict = {True: "met", False: "**not met**", None: "not measured"}
     lines = ["| target | where | measured | verdict |", "|---|---|---|---|"]
-    lines += [f"| {r.target} | {r.where} | {r.measured} | {verdict[r.met]} |" for r in rows]
+    lines += [f"| {r.target} | {r.where} | {r.measured} | {verdict[r.met]}"
+              + (" (within its 95 % interval)" if r.met is False and r.within else "") + " |" for r in rows]
     met = sum(r.met is True for r in rows)
     unmet = sum(r.met is False for r in rows)
-    return "\n".join(lines) + f"\n\n{met} met, {unmet} not met, {len(rows) - met - unmet} not measured."
+    edge = sum(r.met is False and bool(r.within) for r in rows)
+    return ("\n".join(lines) + f"\n\n{met} met, {unmet} not met ({edge} of them within the 95 % interval of "
+            f"their mean), {len(rows) - met - unmet} not measured. Intervals: the mean's 95 % bootstrap interval, "
+            "the seeds resampled within each user.")
 
 
 def questions_by_user(trials: list[dict]) -> str:

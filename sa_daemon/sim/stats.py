@@ -22,16 +22,20 @@ STAR_THRESHOLDS = (0.05, 0.01, 0.001, 0.0001)  # p strictly below the k-th thres
 
 
 def bootstrap_ci(
-    values: Sequence[float], level: float = 0.95, n_boot: int = 2000, seed: int = 0
+    values: Sequence[float], level: float = 0.95, n_boot: int = 2000, seed: int = 0,
+    strata: Sequence[object] | None = None,
 ) -> tuple[float, float] | None:
     """Percentile bootstrap confidence interval of the mean of ``values``, in their unit.
 
     ``n_boot`` resamples of size n are drawn with replacement (all at once, an ``(n_boot, n)`` index
     array from ``np.random.default_rng(seed)``, so the result is deterministic for a seed); the interval
     is the ``(1 - level) / 2`` and ``(1 + level) / 2`` quantiles (linear interpolation) of their means.
+    With ``strata`` (one label per value) each resample keeps every stratum's size and draws within it:
+    the interval of a mean over a fixed mix, such as the population's users, where only the seeds vary.
     No values: None. One value, or all values equal: the degenerate interval ``(v, v)`` exactly.
     ``values`` must be 1-D and finite: a None, NaN or infinite entry raises ValueError (drop failed
-    trials before, deliberately). ``level`` must lie in (0, 1) and ``n_boot`` be at least 1.
+    trials before, deliberately). ``level`` must lie in (0, 1), ``n_boot`` be at least 1 and ``strata``
+    as long as ``values``.
     """
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level}")
@@ -40,6 +44,8 @@ def bootstrap_ci(
     x = np.asarray(values, dtype=float)  # None -> NaN, refused below
     if x.ndim != 1:
         raise ValueError(f"values must be 1-D, got shape {x.shape}")
+    if strata is not None and len(strata) != x.size:
+        raise ValueError(f"strata must label every value: {len(strata)} labels for {x.size} values")
     if x.size == 0:
         return None
     if not np.all(np.isfinite(x)):
@@ -47,7 +53,15 @@ def bootstrap_ci(
     if np.all(x == x[0]):
         return float(x[0]), float(x[0])
     rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, size=(n_boot, x.size))].mean(axis=1)
+    if strata is None:
+        index = rng.integers(0, x.size, size=(n_boot, x.size))
+    else:
+        members = {}
+        for i, label in enumerate(strata):
+            members.setdefault(label, []).append(i)
+        index = np.concatenate([np.asarray(m)[rng.integers(0, len(m), size=(n_boot, len(m)))]
+                                for m in members.values()], axis=1)
+    means = x[index].mean(axis=1)
     lo, hi = np.quantile(means, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
     return float(lo), float(hi)
 
