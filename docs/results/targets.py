@@ -9,7 +9,10 @@ first task) is taken once, from the first file, and two records of it that disag
 then the files come from different models. Paired tests are recomputed on the pooled trials with the
 evaluation's own :func:`~sa_daemon.sim.evaluate.compare` (Wilcoxon by seed, Holm over every test of a
 (scene, task, user)), so a manual run on the same seeds joins the HO comparison's correction. A target
-whose trials are not in the files is reported as not measured, not as met. Prints a Markdown table, then
+whose trials are not in the files is reported as not measured, not as met. A target judged on a mean
+(questions a task, the 22 goals, correct prediction) is judged on the mean and shows its 95 % bootstrap
+interval, the seeds resampled within each user; a row not met is marked when its target lies within that
+interval (at a band's edge, where another sample may meet it). Prints a Markdown table, then
 the policy's questions a task per user on the tasks with a question-count target (and when the first came),
 and per user its time and input over HO's and manual's on Table I and the simple study.
 
