@@ -50,6 +50,13 @@ class IntentConfig(_Section):
     action_apply_time_s: float = Field(0.1, gt=0, description="time the user's twist is applied in Q (s)")
     cap: float = Field(0.99, gt=0, lt=1, description="maximum probability of one goal")
     answer_p_correct: float = Field(0.999, gt=0.5, lt=1, description="P(yes | asked goal is the goal)")
+    reading_trust: float = Field(
+        1.0, gt=0, le=1,
+        description="the prior probability that the tracker reads this person's input soundly; below 1 a 'no' "
+        "to a target the belief held likely is evidence it does not, and the open targets' probability is "
+        "mixed toward uniform over them by the posterior doubt (docs/model.md, A surprising no); 1 = the "
+        "paper's answers, the default (session 51, screened)",
+    )
     resample: bool = Field(True, description="resample and redistribute grasp poses (section III-G)")
     rotation_weight_m_per_rad: float = Field(
         0.05, ge=0, description="weight of rotation distance when picking k_c (m per rad)"

@@ -293,6 +293,58 @@ def test_answer_about_a_target_with_several_copies_moves_all_copies():
     np.testing.assert_allclose(no.probs, [x / sum(w) for x in w], atol=1e-12)
 
 
+def test_a_surprising_no_mixes_the_open_targets_toward_uniform_by_hand():
+    """``intent.reading_trust`` 0.9: a "no" to the target the belief held at 0.7 leaves the input's reading
+    sound with posterior 0.9 * 0.3 / (0.9 * 0.3 + 0.1 * 0.75), and the three open targets' mass is dealt
+    that share as it was and the rest equally."""
+    prior = [0.7, 0.2, 0.06, 0.04]
+    doubt = INTENT.model_copy(update={"reading_trust": 0.9})
+    b = Belief.from_probs(four_targets(), np.array(prior)).after_answer("a:top", False, doubt)
+    w = [prior[0] * 0.001] + [p * 0.999 for p in prior[1:]]
+    bayes = [x / sum(w) for x in w]
+    trust = 0.9 * 0.3 / (0.9 * 0.3 + 0.1 * (1 - 1 / 4))
+    rest = sum(bayes[1:])
+    np.testing.assert_allclose(b.probs, [bayes[0]] + [trust * q + (1 - trust) * rest / 3 for q in bayes[1:]],
+                               atol=1e-12)
+    assert b.ruled_out == {"a:top"}
+    # the default trusts the reading: the plain Bayes update
+    plain = Belief.from_probs(four_targets(), np.array(prior)).after_answer("a:top", False, INTENT)
+    np.testing.assert_allclose(plain.probs, bayes, atol=1e-12)
+
+
+def test_the_likelier_the_denied_target_the_more_the_reading_is_doubted():
+    """Each open target's share of the open mass moves toward uniform by ``1 - trust``, the posterior doubt:
+    0.22 after a "no" to the target held at 0.7, 0.08 after one to the target held at 0.04."""
+    doubt = INTENT.model_copy(update={"reading_trust": 0.9})
+    prior = np.array([0.7, 0.2, 0.06, 0.04])
+    for denied, watched, b_t in (("a:top", 1, 0.7), ("d:top", 0, 0.04)):
+        plain = Belief.from_probs(four_targets(), prior).after_answer(denied, False, INTENT).probs
+        mixed = Belief.from_probs(four_targets(), prior).after_answer(denied, False, doubt).probs
+        open_ = [k for k in range(4) if "abcd"[k] != denied[0]]
+        share_plain = plain[watched] / plain[open_].sum()
+        share_mixed = mixed[watched] / mixed[open_].sum()
+        trust = 0.9 * (1 - b_t) / (0.9 * (1 - b_t) + 0.1 * 0.75)
+        assert (share_plain - share_mixed) / (share_plain - 1 / 3) == pytest.approx(1 - trust, rel=1e-9)
+
+
+def test_a_doubted_no_leaves_denied_targets_and_a_yes_alone():
+    doubt = INTENT.model_copy(update={"reading_trust": 0.5})
+    first = Belief.from_probs(four_targets(), np.array([0.1, 0.6, 0.2, 0.1])).after_answer("a:top", False, doubt)
+    second = first.after_answer("b:top", False, doubt).probs
+    # by hand: Bayes for "no" to b, then only c and d (open, not b) mixed; a, denied before, keeps its share
+    q = first.probs
+    w = [q[0] * 0.999, q[1] * 0.001, q[2] * 0.999, q[3] * 0.999]
+    bayes = [x / sum(w) for x in w]
+    trust = 0.5 * (1 - q[1]) / (0.5 * (1 - q[1]) + 0.5 * (1 - 1 / 3))  # b, c, d open before the answer
+    rest = bayes[2] + bayes[3]
+    np.testing.assert_allclose(second, [bayes[0], bayes[1]] + [trust * x + (1 - trust) * rest / 2 for x in bayes[2:]],
+                               atol=1e-12)
+    confirmed = Belief.from_probs(four_targets(), np.array([0.1, 0.6, 0.2, 0.1])).after_answer("b:top", True, doubt)
+    after = confirmed.after_answer("c:top", False, doubt)
+    plain = confirmed.after_answer("c:top", False, INTENT)
+    np.testing.assert_allclose(after.probs, plain.probs, atol=1e-15)  # after a yes the reading is not doubted
+
+
 def test_answer_about_unknown_target_is_refused():
     with pytest.raises(ValueError):
         Belief.uniform(four_targets()).after_answer("spoon:top", True, INTENT)

@@ -265,12 +265,46 @@ class Belief:
         return p_yes if yes else 1.0 - p_yes
 
     def after_answer(self, target: str, yes: bool, cfg: IntentConfig) -> Belief:
-        """Bayes update from a yes/no answer to "is ``target`` your goal?"."""
+        """Bayes update from a yes/no answer to "is ``target`` your goal?"; a "no" with
+        ``intent.reading_trust`` below 1 then doubts the input's reading (:meth:`_doubted`)."""
         if target not in self.goals.targets:
             raise ValueError(f"unknown target {target!r}")
         like = self.answer_likelihood(target, yes, cfg.answer_p_correct)
         log_p = self._normalised(self.log_p + np.log(like), cfg.cap)
-        return self._with(log_p, target) if yes else self._with(log_p, ruled_out=frozenset({target}))
+        if yes:
+            return self._with(log_p, target)
+        if cfg.reading_trust < 1.0 and self.confirmed is None:
+            log_p = self._doubted(log_p, target, cfg)
+        return self._with(log_p, ruled_out=frozenset({target}))
+
+    def _doubted(self, log_p: FloatArray, target: str, cfg: IntentConfig) -> FloatArray:
+        """After a "no" to ``target``: the belief ``log_p`` over the targets still open mixed toward uniform.
+
+        Two readings of the input so far: sound (prior ``lambda_0 = intent.reading_trust``), the belief as
+        it is, under which the "no" had probability ``1 - b_t`` (``b_t`` the target's probability before the
+        answer); or unsound, the input telling nothing, a uniform belief over the ``n`` targets open before
+        the answer, under which it had ``1 - 1/n``. The posterior trust is
+        ``lambda = lambda_0 (1 - b_t) / (lambda_0 (1 - b_t) + (1 - lambda_0)(1 - 1/n))`` and each open
+        target's share of the open mass becomes ``lambda p + (1 - lambda) / (n - 1)``, a target's share dealt
+        to its copies as they hold it (equally where they hold nothing). Denied targets keep theirs."""
+        open_targets = [t for t in self.goals.targets if t not in self.ruled_out]
+        n = len(open_targets)
+        if n <= 2:
+            return log_p  # nothing left to spread over
+        b_t = float(np.exp(self.log_p)[self.goals.target_mask(target)].sum())
+        trust = cfg.reading_trust * (1.0 - b_t)
+        trust = trust / (trust + (1.0 - cfg.reading_trust) * (1.0 - 1.0 / n))
+        p = np.exp(log_p)
+        rest = [t for t in open_targets if t != target]
+        masks = [self.goals.target_mask(t) for t in rest]
+        mass = sum(float(p[m].sum()) for m in masks)
+        out = p.copy()
+        for m in masks:
+            held = float(p[m].sum())
+            within = p[m] / held if held > 0.0 else np.full(int(m.sum()), 1.0 / m.sum())
+            out[m] = (trust * held + (1.0 - trust) * mass / len(rest)) * within
+        with np.errstate(divide="ignore"):
+            return self._normalised(np.log(out), cfg.cap)
 
     def without_confirmation(self) -> Belief:
         """This belief with its "yes" withdrawn (``asking.withdraw_yes_s``): the same probabilities, the
