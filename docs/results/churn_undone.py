@@ -119,8 +119,9 @@ def main() -> int:
     moved = sum(abs(t["rerun_off_s"] - t["off_s"]) > 1e-9 for t in trials)
     print(f"{len(trials)} trials the yield changed ({', '.join(methods)}); {moved} of their reruns with the yield off "
           "did not reproduce the recorded time\n")
-    if args.json:
-        args.json.write_text(json.dumps(trials))
+    if args.json:  # meta.script: rerun.py leaves the file to this script
+        args.json.write_text(json.dumps({"meta": {"script": "docs/results/churn_undone.py", "files": [str(f) for f in args.files],
+                                                  "methods": methods}, "switches": trials}))
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for t in trials:
         groups[("imprecise" if t["user"] == "imprecise" else t["user"], t["kind"])].append(t)
