@@ -287,22 +287,21 @@ class Belief:
         ``lambda = lambda_0 (1 - b_t) / (lambda_0 (1 - b_t) + (1 - lambda_0)(1 - 1/n))`` and each open
         target's share of the open mass becomes ``lambda p + (1 - lambda) / (n - 1)``, a target's share dealt
         to its copies as they hold it (equally where they hold nothing). Denied targets keep theirs."""
-        open_targets = [t for t in self.goals.targets if t not in self.ruled_out]
-        n = len(open_targets)
+        gs = self.goals
+        rest = np.array([t not in self.ruled_out and t != target for t in gs.targets])  # open after the answer
+        n = int(rest.sum()) + 1  # open before it
         if n <= 2:
             return log_p  # nothing left to spread over
-        b_t = float(np.exp(self.log_p)[self.goals.target_mask(target)].sum())
+        b_t = float(gs.target_sums(self.probs)[gs.targets.index(target)])
         trust = cfg.reading_trust * (1.0 - b_t)
         trust = trust / (trust + (1.0 - cfg.reading_trust) * (1.0 - 1.0 / n))
         p = np.exp(log_p)
-        rest = [t for t in open_targets if t != target]
-        masks = [self.goals.target_mask(t) for t in rest]
-        mass = sum(float(p[m].sum()) for m in masks)
-        out = p.copy()
-        for m in masks:
-            held = float(p[m].sum())
-            within = p[m] / held if held > 0.0 else np.full(int(m.sum()), 1.0 / m.sum())
-            out[m] = (trust * held + (1.0 - trust) * mass / len(rest)) * within
+        held = gs.target_sums(p)
+        mixed = trust * held + (1.0 - trust) * held[rest].sum() / (n - 1)
+        of = gs.target_index
+        copies = np.bincount(of, minlength=len(gs.targets))
+        within = np.where(held[of] > 0.0, p / np.where(held[of] > 0.0, held[of], 1.0), 1.0 / copies[of])
+        out = np.where(rest[of], mixed[of] * within, p)
         with np.errstate(divide="ignore"):
             return self._normalised(np.log(out), cfg.cap)
 
