@@ -63,7 +63,7 @@ Key = tuple[str, str]
 class Row:
     """One line of the report: the target, where it is measured, the figure, and the verdict (``None``:
     not measured in the files). ``within`` is, for a row judged on a mean, whether the target is met
-    anywhere in the mean's 95 % interval (:func:`_interval`): a row not met but within it is at the
+    anywhere in the mean's 95 % interval (:func:`_judged`): a row not met but within it is at the
     band's edge, one not met and outside it is not a matter of the sample."""
 
     target: str
@@ -117,17 +117,14 @@ def _where(key: Key) -> str:
     return f"{key[0]} `{key[1]}`"
 
 
-def _interval(ts: list[dict], value: Callable[[dict], float]) -> tuple[float, float]:
-    """The 95 % bootstrap interval of the mean of ``value`` over ``ts``, the seeds resampled within each
-    user (the population's mix of users is fixed by design; only its seeds are a sample)."""
-    return bootstrap_ci([float(value(t)) for t in ts], strata=[t["user"] for t in ts])
-
-
 def _judged(ts: list[dict], value: Callable[[dict], float], ok: Callable[[float, float], bool]) -> tuple[str, bool, bool]:
-    """The mean of ``value`` over ``ts`` with its interval, as text; whether ``ok`` holds on the mean; and
-    whether it holds anywhere in the interval (``ok(lo, hi)`` is given the interval's ends)."""
-    mean = _mean([float(value(t)) for t in ts])
-    lo, hi = _interval(ts, value)
+    """The mean of ``value`` over ``ts`` with its 95 % bootstrap interval, the seeds resampled within each
+    user (the population's mix of users is fixed by design; only its seeds are a sample), as text; whether
+    ``ok`` holds on the mean; and whether it holds anywhere in the interval (``ok(lo, hi)`` is given the
+    interval's ends)."""
+    values = [float(value(t)) for t in ts]
+    mean = _mean(values)
+    lo, hi = bootstrap_ci(values, strata=[t["user"] for t in ts])
     return f"{mean:.2f} [{lo:.2f}, {hi:.2f}]", ok(mean, mean), ok(lo, hi)
 
 
