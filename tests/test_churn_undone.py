@@ -52,7 +52,8 @@ def test_a_recorded_livelock_rerun_without_the_yield_is_the_recorded_one():
              "user": "own-pose-off-list", "method": "policy", "seed": 1711}
     (before,) = [t for t in json.loads((RESULTS / "suite-table1-pop1700-pose.json").read_text())["trials"]
                  if all(t[k] == trial[k] for k in ("task", "user", "method", "seed"))]
-    time_s, events = churn_undone.switches(trial)
+    recorded = json.loads(Path(trial["src"]).read_text())["meta"]["config"]
+    time_s, events = churn_undone.switches(trial, recorded)
     assert time_s == before["completion_time_s"] == 100.0
     assert len(events) == before["mode_changes"] > 40
     assert events[0][1] is None and sum(s is not None for _, s in events) > len(events) / 2

@@ -63,10 +63,11 @@ def changed(off: Path, on: Path, methods: list[str]) -> list[dict]:
     return out
 
 
-def switches(trial: dict) -> tuple[float, list[tuple[float, float | None]]]:
-    """The trial run again with the yield off: its completion time (s) and every mode switch as
-    ``(t s, s . d / |d|)`` (module doc; ``None`` on a first entry)."""
-    cfg = recorded_config(json.loads(Path(trial["src"]).read_text())["meta"]["config"])
+def switches(trial: dict, recorded: dict) -> tuple[float, list[tuple[float, float | None]]]:
+    """The trial run again with the yield off, from its file's recorded configuration (``meta.config``):
+    its completion time (s) and every mode switch as ``(t s, s . d / |d|)`` (module doc; ``None``: not
+    scored)."""
+    cfg = recorded_config(recorded)
     cfg = cfg.model_copy(update={"blend": cfg.blend.model_copy(update={"churn_window_s": 0.0})})
     profile = load_user(trial["user"])
     result = run_trial(load_scene(trial["scene"]), trial["task"], trial["method"], trial["seed"],
@@ -112,8 +113,9 @@ def main() -> int:
         ap.error("files come in pairs: OFF.json ON.json")
     methods = args.method or ["policy", "ho"]
     trials = [t for off, on in zip(args.files[::2], args.files[1::2], strict=True) for t in changed(off, on, methods)]
+    recorded = {str(on): json.loads(on.read_text())["meta"]["config"] for on in args.files[1::2]}  # once a file
     with Pool(args.jobs) as pool:
-        scored = pool.map(switches, trials, chunksize=1)
+        scored = pool.starmap(switches, [(t, recorded[t["src"]]) for t in trials], chunksize=1)
     for t, (off_s, events) in zip(trials, scored, strict=True):
         t["rerun_off_s"], t["switches"] = off_s, events
     moved = sum(abs(t["rerun_off_s"] - t["off_s"]) > 1e-9 for t in trials)
